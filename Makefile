@@ -1,0 +1,32 @@
+SHELL := /bin/bash
+ENV := source scripts/env.sh
+ARGS ?=
+
+.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness clean
+
+setup:
+	@scripts/bootstrap.sh
+
+demo: setup
+	@$(ENV) && python scripts/demo.py $(ARGS)
+
+test: setup
+	@$(ENV) && python -m pytest -q -p no:cacheprovider src tests $(ARGS)
+
+lint: setup
+	@$(ENV) && ruff check src tests scripts
+
+bench-perf: setup
+	@$(ENV) && bench_perf $(ARGS)
+
+bench-seg: setup
+	@$(ENV) && bench_seg $(ARGS)
+
+bench-recon: setup
+	@$(ENV) && bench_recon $(ARGS)
+
+bench-manip: setup
+	@$(ENV) && bench_manip $(ARGS)
+
+clean:
+	rm -rf build install log

@@ -1,0 +1,10 @@
+# Source me: the project venv, the colcon install space and headless rendering.
+_arm_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+source "$_arm_root/.venv/bin/activate"
+export AMENT_PREFIX_PATH="$_arm_root/.venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+export CMAKE_PREFIX_PATH="$_arm_root/.venv${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+source "$_arm_root/install/setup.bash"
+export MUJOCO_GL="${MUJOCO_GL:-egl}"
+export PYOPENGL_PLATFORM="${PYOPENGL_PLATFORM:-egl}"
+export ARM_ROOT="$_arm_root"
+unset _arm_root

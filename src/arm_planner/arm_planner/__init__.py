@@ -1,0 +1,1 @@
+"""MuJoCo twin of the reconstructed scene and MPPI manipulation planning."""

@@ -1,0 +1,1 @@
+"""Unseen-object instance segmentation of tabletop RGB-D frames."""

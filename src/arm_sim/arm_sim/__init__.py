@@ -1,0 +1,1 @@
+"""Ground-truth MuJoCo tabletop world: objects, cluttered scenes, robot, RGB-D rendering and the sim node."""
