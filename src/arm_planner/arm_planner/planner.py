@@ -1,0 +1,222 @@
+"""plan(task, target, goal) in a MuJoCo twin -> joint trajectory + predicted outcome.
+
+The executed plan is built the paper's way: every MPPI step optimises the next `horizon` control
+steps from the twin's current state, the first control is applied to the twin for one control step
+(0.02 s), and the task's state machine advances on that executed state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from arm_planner.kinematics import BodyKinematics
+from arm_planner.mppi import STATE_SPEC, ControlLimits, Mppi, MppiConfig, get_state, state_layout
+from arm_planner.rewards import (
+    GRASP_LIFT_M,
+    TASK_GRASP,
+    TASK_PUSH,
+    TASK_REARRANGE,
+    TASKS,
+    GraspReward,
+    PushReward,
+    RewardWeights,
+    TargetGeometry,
+)
+from arm_planner.robot_spec import ResolvedRobot, RobotSpec
+
+DEFAULT_TOLERANCE_M = 0.025
+
+
+@dataclass
+class PlanRequest:
+    task: str
+    target_body: str
+    goal_displacement_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tolerance_m: float = DEFAULT_TOLERANCE_M
+
+
+@dataclass
+class NoiseConfig:
+    """Sampling noise per control step: task-space (TCP) std mapped through the arm Jacobian + joint std."""
+
+    linear_std_m: float = 0.01
+    angular_std_rad: float = 0.03
+    joint_std_rad: float = 0.005
+    damping: float = 0.05
+
+
+@dataclass
+class PlannerConfig:
+    mppi: MppiConfig = field(default_factory=MppiConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    weights: RewardWeights = field(default_factory=RewardWeights)
+    close_steps: int = 75
+    grasp_lift_goal_m: float = 0.10
+    # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
+    done_hold_steps: int = 10
+
+
+@dataclass
+class PlanResult:
+    success: bool
+    message: str
+    final_error_m: float
+    times_s: np.ndarray
+    controls: np.ndarray
+    joint_names: tuple[str, ...]
+    joint_positions: np.ndarray
+    states: list[str]
+    step_ms: np.ndarray
+
+
+Feedback = Callable[[int, int, str, float], None]
+
+
+class Planner:
+    """MPPI planner bound to one compiled twin model (rebuild it when the twin changes)."""
+
+    def __init__(self, model: mujoco.MjModel, robot: RobotSpec, config: PlannerConfig | None = None):
+        self.config = config or PlannerConfig()
+        cfg = self.config.mppi
+        if cfg.physics_dt_s is not None:
+            model.opt.timestep = cfg.physics_dt_s
+        self.model = model
+        self.robot: ResolvedRobot = robot.resolve(model)
+        self.limits = ControlLimits.from_model(model, self.robot.max_rate, cfg.control_dt_s)
+        self.mppi = Mppi(model, cfg, self.limits)
+        self.qpos_offset, _ = state_layout(model)
+        self.hand = BodyKinematics(model, self.robot.tcp_body, np.asarray(robot.tcp_offset_m))
+        self._data = mujoco.MjData(model)
+
+    def close(self) -> None:
+        self.mppi.close()
+
+    def _reward(self, request: PlanRequest, geometry: TargetGeometry):
+        target_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, request.target_body)
+        if target_id < 0:
+            raise ValueError(f"target body {request.target_body!r} not in the twin")
+        target = BodyKinematics(self.model, target_id, self.model.body_ipos[target_id].copy())
+        common = dict(
+            hand=self.hand,
+            target=target,
+            geometry=geometry,
+            qpos_offset=self.qpos_offset,
+            nq=self.model.nq,
+            weights=self.config.weights,
+        )
+        if request.task == TASK_GRASP:
+            lift = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
+            return GraspReward(**common, goal_displacement=lift, close_steps=self.config.close_steps)
+        if request.task == TASK_REARRANGE:
+            return GraspReward(
+                **common,
+                goal_displacement=np.asarray(request.goal_displacement_m, dtype=np.float64),
+                close_steps=self.config.close_steps,
+            )
+        if request.task == TASK_PUSH:
+            return PushReward(
+                **common, goal_displacement=np.asarray(request.goal_displacement_m, dtype=np.float64)
+            )
+        raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
+
+    def noise_basis(self, data: mujoco.MjData) -> np.ndarray:
+        """Rows: joint-space directions that move the TCP along x, y, z and rotate it, plus joint noise."""
+        n = self.config.noise
+        mujoco.mj_kinematics(self.model, data)
+        mujoco.mj_comPos(self.model, data)
+        jacp = np.zeros((3, self.model.nv))
+        jacr = np.zeros((3, self.model.nv))
+        tcp_world = data.xpos[self.robot.tcp_body] + data.xmat[self.robot.tcp_body].reshape(
+            3, 3
+        ) @ np.asarray(self.robot.spec.tcp_offset_m)
+        mujoco.mj_jac(self.model, data, jacp, jacr, tcp_world, self.robot.tcp_body)
+        jac = np.concatenate([jacp, jacr])[:, self.robot.dof_adr]
+        pinv = jac.T @ np.linalg.inv(jac @ jac.T + n.damping**2 * np.eye(6))
+        stds = np.array([n.linear_std_m] * 3 + [n.angular_std_rad] * 3)
+        arm_rows = np.concatenate([(pinv * stds).T, n.joint_std_rad * np.eye(len(self.robot.arm_actuators))])
+        basis = np.zeros((arm_rows.shape[0], self.model.nu))
+        basis[:, self.robot.arm_actuators] = arm_rows
+        return basis
+
+    def evaluate(self, reward, task: str, state: np.ndarray, tolerance_m: float, start_com: np.ndarray):
+        """(met, error_m) of the task at a twin state."""
+        _, _, com = reward.poses(state[None])
+        com = com[0]
+        if task == TASK_GRASP:
+            lift = com[2] - start_com[2]
+            return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
+        error = float(np.linalg.norm(reward.goal - com))
+        return error <= tolerance_m, error
+
+    def plan(
+        self,
+        initial_state: np.ndarray,
+        request: PlanRequest,
+        geometry: TargetGeometry,
+        feedback: Feedback | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> PlanResult:
+        """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open."""
+        cfg = self.config
+        model, data, robot = self.model, self._data, self.robot
+        reward = self._reward(request, geometry)
+        mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
+        mujoco.mj_forward(model, data)
+        start_com = reward.poses(get_state(model, data)[None])[2][0]
+        ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], False, model.nu)
+        data.ctrl[:] = ctrl
+        self.mppi.reset(ctrl)
+        substeps = self.mppi.rollout.substeps
+        controls, states, step_ms = [], [], []
+        met_streak, met, error = 0, False, float("inf")
+        message = "step budget used"
+        for step in range(cfg.mppi.steps):
+            if should_stop is not None and should_stop():
+                message = "stopped"
+                break
+            t0 = time.perf_counter()
+            state = get_state(model, data)
+            gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
+            result = self.mppi.step(
+                state, ctrl, reward, self.noise_basis(data), {int(robot.gripper_actuator): gripper}
+            )
+            step_ms.append(1e3 * (time.perf_counter() - t0))
+            ctrl = result.control
+            data.ctrl[:] = ctrl
+            mujoco.mj_step(model, data, nstep=substeps)
+            if not np.all(np.isfinite(data.qpos)):
+                message = f"twin physics diverged at step {step}"
+                met, error = False, float("inf")
+                break
+            executed = get_state(model, data)
+            states.append(reward.update(executed))
+            controls.append(ctrl.copy())
+            self.mppi.shift()
+            met, error = self.evaluate(reward, request.task, executed, request.tolerance_m, start_com)
+            holding = request.task == TASK_PUSH or reward.state == "grasped"
+            met_streak = met_streak + 1 if (met and holding) else 0
+            if feedback is not None:
+                feedback(step + 1, cfg.mppi.steps, states[-1], error)
+            if cfg.done_hold_steps and met_streak >= cfg.done_hold_steps:
+                message = f"task met in the twin after {step + 1} steps"
+                break
+        else:
+            message = "task met in the twin" if met else "step budget used without meeting the task"
+        controls_arr = np.array(controls).reshape(-1, model.nu)
+        times = cfg.mppi.control_dt_s * np.arange(1, len(controls_arr) + 1)
+        return PlanResult(
+            success=bool(met),
+            message=message,
+            final_error_m=float(error),
+            times_s=times,
+            controls=controls_arr,
+            joint_names=robot.spec.trajectory_joint_names,
+            joint_positions=controls_arr[:, robot.actuators],
+            states=states,
+            step_ms=np.array(step_ms),
+        )

@@ -1,0 +1,233 @@
+"""Stateful task rewards for MPPI: grasp, push, rearrange.
+
+Each reward scores rollouts (batched, vectorised over paths and horizon) and keeps a small state
+machine that advances only on the executed trajectory, as in the paper's appendix "MPPI
+Parameters": ungrasped -> grasping (gripper closes for `close_steps`) -> grasped.
+
+Paper reward, ungrasped/grasping: -d(hand, target) - 5 (hand height - 0.38 m) - 0.5 angle(hand, z).
+Taken literally the height term rewards descending anywhere at five times the weight of closing
+the distance, which drives the hand into whatever stands in front of the target. We keep its weight
+(5) but apply it only below an approach funnel over the grasp point (height allowed to drop with
+horizontal distance), so the hand comes down on the target from above. grasped: -d(hand, target)
+- d(goal, object), as in the paper. The push reward (not given in the paper) uses the same terms:
+approach a point behind the object (opposite the goal direction), then push it to the goal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from arm_planner.kinematics import BodyKinematics
+
+TASK_GRASP = "grasp"
+TASK_PUSH = "push"
+TASK_REARRANGE = "rearrange"
+TASKS = (TASK_GRASP, TASK_PUSH, TASK_REARRANGE)
+GRASP_LIFT_M = 0.05
+
+
+@dataclass
+class TargetGeometry:
+    """The target in the twin at planning start, world frame."""
+
+    com_world: np.ndarray
+    vertices_world: np.ndarray
+    table_height_m: float
+
+    @property
+    def top_z(self) -> float:
+        return float(self.vertices_world[:, 2].max())
+
+    @property
+    def bottom_z(self) -> float:
+        return float(self.vertices_world[:, 2].min())
+
+    def minor_axis_xy(self) -> np.ndarray:
+        """Unit horizontal direction of the object's smallest horizontal extent (grasp closing axis)."""
+        xy = self.vertices_world[:, :2] - self.vertices_world[:, :2].mean(axis=0)
+        cov = xy.T @ xy / max(len(xy), 1)
+        _, vecs = np.linalg.eigh(cov)
+        return np.append(vecs[:, 0], 0.0)
+
+    def support_xy(self, direction_xy: np.ndarray) -> float:
+        """How far the object reaches from its centre of mass along a horizontal unit direction."""
+        d = np.asarray(direction_xy, dtype=np.float64)[:2]
+        return float(np.max((self.vertices_world[:, :2] - self.com_world[:2]) @ d))
+
+    def width_along(self, axis_xy: np.ndarray) -> float:
+        return self.support_xy(axis_xy) + self.support_xy(-np.asarray(axis_xy)[:2])
+
+
+@dataclass
+class RewardWeights:
+    distance: float = 1.0
+    height: float = 5.0
+    angle: float = 0.5
+    yaw: float = 0.2
+    goal: float = 1.0
+    # Approach funnel: allowed height above the grasp/push point per metre of horizontal distance.
+    funnel_slope: float = 1.0
+    funnel_margin_m: float = 0.02
+
+
+def _angle_down(rot: np.ndarray) -> np.ndarray:
+    """Angle between the hand's approach axis (its z axis) and world -z, radians."""
+    return np.arccos(np.clip(-rot[..., 2, 2], -1.0, 1.0))
+
+
+def _yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
+    """Angle between the finger closing axis (hand y) and a horizontal axis, modulo pi."""
+    fingers = rot[..., :2, 1]
+    norm = np.linalg.norm(fingers, axis=-1) + 1e-9
+    return np.arccos(np.clip(np.abs(fingers @ axis_xy[:2]) / norm, 0.0, 1.0))
+
+
+@dataclass
+class TaskReward:
+    """Shared machinery: hand and target kinematics from qpos, state, step counter."""
+
+    hand: BodyKinematics
+    target: BodyKinematics
+    geometry: TargetGeometry
+    qpos_offset: int
+    nq: int
+    weights: RewardWeights = field(default_factory=RewardWeights)
+    state: str = "ungrasped"
+    step_count: int = 0
+
+    def poses(self, states: np.ndarray):
+        qpos = states[..., self.qpos_offset : self.qpos_offset + self.nq]
+        hand_pos, hand_rot = self.hand(qpos)
+        target_pos, _ = self.target(qpos)
+        return hand_pos, hand_rot, target_pos
+
+    def funnel_penalty(self, hand_pos: np.ndarray, point: np.ndarray) -> np.ndarray:
+        w = self.weights
+        d_xy = np.linalg.norm(hand_pos[..., :2] - point[..., :2], axis=-1)
+        floor = point[..., 2] + w.funnel_slope * np.maximum(d_xy - w.funnel_margin_m, 0.0)
+        return np.maximum(floor - hand_pos[..., 2], 0.0)
+
+
+@dataclass
+class GraspReward(TaskReward):
+    """Grasp (goal = lifted by `lift_goal_m`) or rearrange (goal = start + displacement)."""
+
+    goal_displacement: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.10]))
+    close_steps: int = 75
+    settle_steps: int = 10
+    close_distance_m: float = 0.01
+    stall_window: int = 10
+    stall_eps_m: float = 0.002
+    max_close_distance_m: float = 0.03
+    grasp_depth_m: float = 0.03
+    _history: list = field(default_factory=list)
+    _closing_since: int = -1
+    _grasp_offset: np.ndarray | None = None
+
+    def __post_init__(self):
+        g = self.geometry
+        self.goal = g.com_world + self.goal_displacement
+        z = max(g.table_height_m + 0.015, g.top_z - self.grasp_depth_m)
+        self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
+        self.grasp_offset = self.grasp_point - g.com_world
+        self.closing_axis = self.geometry.minor_axis_xy()
+
+    @property
+    def gripper_closed(self) -> bool:
+        return self.state != "ungrasped"
+
+    def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        w = self.weights
+        hand_pos, hand_rot, target_pos = self.poses(states)
+        grasp_point = target_pos + self.grasp_offset
+        reach = np.linalg.norm(hand_pos - grasp_point, axis=-1)
+        if self.state == "grasped":
+            return -w.distance * reach - w.goal * np.linalg.norm(self.goal - target_pos, axis=-1)
+        return (
+            -w.distance * reach
+            - w.height * self.funnel_penalty(hand_pos, grasp_point)
+            - w.angle * _angle_down(hand_rot)
+            - w.yaw * _yaw_error(hand_rot, self.closing_axis)
+        )
+
+    def update(self, state: np.ndarray) -> str:
+        """Advance the state machine on the executed state; returns the new state name."""
+        hand_pos, _, target_pos = self.poses(state[None])
+        distance = float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.grasp_offset)))
+        self._history.append(distance)
+        self.step_count += 1
+        if self.state == "ungrasped":
+            n = self.step_count
+            decreasing = n > self.stall_window and (
+                self._history[-1 - self.stall_window] - distance > self.stall_eps_m
+            )
+            still_ungrasped = n < self.settle_steps or (distance > self.close_distance_m and decreasing)
+            if not still_ungrasped and distance <= self.max_close_distance_m:
+                self.state = "grasping"
+                self._closing_since = n
+        elif self.state == "grasping" and self.step_count - self._closing_since >= self.close_steps:
+            self.state = "grasped"
+        return self.state
+
+    def error(self, state: np.ndarray) -> float:
+        _, _, target_pos = self.poses(state[None])
+        return float(np.linalg.norm(self.goal - target_pos[0]))
+
+
+@dataclass
+class PushReward(TaskReward):
+    """Approach a point behind the target (w.r.t. the goal direction) low over the table, then push."""
+
+    goal_displacement: np.ndarray = field(default_factory=lambda: np.array([0.05, -0.30, 0.0]))
+    contact_gap_m: float = 0.015
+    engage_distance_m: float = 0.02
+    disengage_distance_m: float = 0.06
+    state: str = "approaching"
+
+    def __post_init__(self):
+        g = self.geometry
+        self.goal = g.com_world + self.goal_displacement
+        height = g.top_z - g.bottom_z
+        self.push_z = g.bottom_z + float(np.clip(0.4 * height, 0.015, 0.05))
+
+    @property
+    def gripper_closed(self) -> bool:
+        return True
+
+    def _contact_point(self, target_pos: np.ndarray) -> np.ndarray:
+        to_goal = self.goal[:2] - target_pos[..., :2]
+        direction = to_goal / (np.linalg.norm(to_goal, axis=-1, keepdims=True) + 1e-9)
+        reach = self._support_batch(-direction)
+        xy = target_pos[..., :2] - direction * (reach + self.contact_gap_m)[..., None]
+        z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
+        return np.concatenate([xy, z[..., None]], axis=-1)
+
+    def _support_batch(self, directions: np.ndarray) -> np.ndarray:
+        rel = self.geometry.vertices_world[:, :2] - self.geometry.com_world[:2]
+        return np.max(directions @ rel.T, axis=-1)
+
+    def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        w = self.weights
+        hand_pos, hand_rot, target_pos = self.poses(states)
+        contact = self._contact_point(target_pos)
+        reach = np.linalg.norm(hand_pos - contact, axis=-1)
+        reward = -w.distance * reach - w.angle * _angle_down(hand_rot)
+        if self.state == "pushing":
+            return reward - w.goal * 2.0 * np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1)
+        return reward - w.height * self.funnel_penalty(hand_pos, contact)
+
+    def update(self, state: np.ndarray) -> str:
+        hand_pos, _, target_pos = self.poses(state[None])
+        distance = float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos[0][None])[0]))
+        self.step_count += 1
+        if self.state == "approaching" and distance < self.engage_distance_m:
+            self.state = "pushing"
+        elif self.state == "pushing" and distance > self.disengage_distance_m:
+            self.state = "approaching"
+        return self.state
+
+    def error(self, state: np.ndarray) -> float:
+        _, _, target_pos = self.poses(state[None])
+        return float(np.linalg.norm(self.goal - target_pos[0]))
