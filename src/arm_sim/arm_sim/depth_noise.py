@@ -1,0 +1,60 @@
+"""Depth-sensor noise model (structured-light / stereo RGB-D camera).
+
+Axial noise grows with distance squared, depth is quantised in disparity, and returns drop out
+at depth edges, at grazing angles, beyond the working range and at random.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass
+class DepthNoise:
+    enabled: bool = True
+    axial_sigma_m: float = 0.0012  # sigma(z) = axial_sigma_m + axial_quadratic * (z - 0.4)^2
+    axial_quadratic: float = 0.0019
+    baseline_m: float = 0.075  # stereo baseline for disparity quantisation
+    subpixel: float = 1.0 / 8.0  # disparity quantisation step, pixels
+    edge_jump_m: float = 0.03  # a neighbour this much nearer or farther marks a depth edge
+    edge_dropout: float = 0.5
+    grazing_deg: float = 78.0  # surfaces seen more obliquely than this lose their returns
+    random_dropout: float = 0.003
+    min_range_m: float = 0.1
+    max_range_m: float = 3.0
+
+
+def _surface_obliquity_cos(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """|cos| of the angle between each pixel's viewing ray and the surface normal."""
+    h, w = depth_m.shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    points = rays * depth_m[..., None]
+    du = np.gradient(points, axis=1)
+    dv = np.gradient(points, axis=0)
+    normal = np.cross(du, dv)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-12
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    return np.abs(np.sum(normal * rays, -1))
+
+
+def apply_depth_noise(depth_m: np.ndarray, K: np.ndarray, rng: np.random.Generator, noise: DepthNoise) -> np.ndarray:
+    """Noisy copy of a perfect depth image (float32 metres, 0 = no return)."""
+    depth = np.asarray(depth_m, dtype=np.float32).copy()
+    depth[~np.isfinite(depth)] = 0.0
+    if not noise.enabled:
+        return depth
+    valid = (depth > noise.min_range_m) & (depth < noise.max_range_m)
+    local_max = cv2.dilate(depth, np.ones((3, 3), np.uint8))
+    local_min = cv2.erode(np.where(valid, depth, np.inf).astype(np.float32), np.ones((3, 3), np.uint8))
+    edge = (local_max - local_min) > noise.edge_jump_m
+    grazing = _surface_obliquity_cos(depth, K) < np.cos(np.deg2rad(noise.grazing_deg))
+    drop = (edge & (rng.random(depth.shape) < noise.edge_dropout)) | grazing
+    drop |= rng.random(depth.shape) < noise.random_dropout
+    sigma = noise.axial_sigma_m + noise.axial_quadratic * (depth - 0.4) ** 2
+    noisy = depth + rng.normal(size=depth.shape).astype(np.float32) * sigma
+    focal_baseline = float(K[0, 0]) * noise.baseline_m
+    disparity = focal_baseline / np.maximum(noisy, 1e-3)
+    noisy = focal_baseline / np.maximum(np.round(disparity / noise.subpixel) * noise.subpixel, 1e-6)
+    return np.where(valid & ~drop, noisy, 0.0).astype(np.float32)

@@ -1,0 +1,193 @@
+"""The one MuJoCo world builder (sim and planner twin) and the simulated world around it."""
+
+import mujoco
+import numpy as np
+
+from arm_sim import robot
+from arm_sim.camera import OPTICAL_TO_MUJOCO, RgbdFrame, intrinsics, silhouette
+from arm_sim.depth_noise import DepthNoise, apply_depth_noise
+
+RENDER_CAMERA = "render_camera"
+ROBOT_BASE_XY = (-0.55, 0.0)
+OBJECT_DENSITY_KG_M3 = 600.0
+OBJECT_FRICTION = (0.9, 0.01, 0.001)
+FLOOR_DROP_M = 0.75
+
+
+def object_body_name(i: int) -> str:
+    return f"object_{i}"
+
+
+def build_world(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: str = "arm_world") -> mujoco.MjModel:
+    """MuJoCo model of a Scene: table, floor, one free body per object (its convex parts as mesh
+    geoms), the robot and a render camera. The planner's twin is built by this same function."""
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.degree = False
+    spec.option.timestep = timestep_s
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0
+    spec.visual.global_.offwidth = 1280
+    spec.visual.global_.offheight = 960
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+    table_z = float(scene.table_height_m)
+    hx, hy = scene.table_half_extent_m
+    world = spec.worldbody
+    world.add_light(pos=[0.3, -0.4, table_z + 2.0], dir=[-0.1, 0.2, -1.0], diffuse=[0.6, 0.6, 0.6])
+    world.add_geom(
+        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, table_z - FLOOR_DROP_M],
+        rgba=[0.45, 0.42, 0.4, 1],
+    )
+    world.add_geom(
+        name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, 0.025], pos=[0, 0, table_z - 0.025],
+        rgba=list(scene.table_rgba), friction=list(OBJECT_FRICTION),
+    )
+    world.add_camera(name=RENDER_CAMERA, pos=[1.0, 0.0, table_z + 1.0], fovy=45.0)
+    for i, placed in enumerate(scene.objects):
+        _add_object(spec, i, placed)
+    if robot_arm:
+        robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
+    return spec.compile()
+
+
+def _add_object(spec: mujoco.MjSpec, i: int, placed) -> None:
+    T = np.asarray(placed.T_world_object, dtype=np.float64)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, T[:3, :3].reshape(9))
+    body = spec.worldbody.add_body(name=object_body_name(i), pos=T[:3, 3].tolist(), quat=quat.tolist())
+    body.add_freejoint(name=f"{object_body_name(i)}_joint")
+    for j, (vertices, faces) in enumerate(placed.convex_parts_local()):
+        mesh_name = f"{object_body_name(i)}_mesh_{j}"
+        spec.add_mesh(name=mesh_name, uservert=np.asarray(vertices, np.float64).reshape(-1).tolist(),
+                      userface=np.asarray(faces, np.int32).reshape(-1).tolist())
+        body.add_geom(
+            name=f"{object_body_name(i)}_part_{j}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh_name,
+            density=placed.density_kg_m3, rgba=list(placed.rgba), friction=list(OBJECT_FRICTION), condim=4,
+        )
+
+
+def object_body_ids(model: mujoco.MjModel, n_objects: int) -> np.ndarray:
+    return np.array([model.body(object_body_name(i)).id for i in range(n_objects)], dtype=np.int64)
+
+
+def body_pose(data: mujoco.MjData, body_id: int) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = data.xmat[body_id].reshape(3, 3)
+    T[:3, 3] = data.xpos[body_id]
+    return T
+
+
+class SimWorld:
+    """A simulated scene: physics, the robot's position control, and RGB-D rendering."""
+
+    def __init__(self, scene, robot_arm: bool = True, width: int = 640, height: int = 480, fovy_deg: float = 45.0):
+        self.scene = scene
+        self.model = build_world(scene, robot_arm=robot_arm)
+        self.data = mujoco.MjData(self.model)
+        self.has_robot = robot_arm
+        self.width, self.height, self.fovy_deg = width, height, fovy_deg
+        self.K = intrinsics(width, height, fovy_deg)
+        self.object_ids = object_body_ids(self.model, len(scene.objects))
+        self._camera_id = self.model.camera(RENDER_CAMERA).id
+        self.model.cam_fovy[self._camera_id] = fovy_deg
+        n_geom = self.model.ngeom
+        self._geom_label = np.zeros(n_geom + 1, dtype=np.uint16)  # last slot: background (-1)
+        body_to_label = np.zeros(self.model.nbody, dtype=np.uint16)
+        body_to_label[self.object_ids] = np.arange(1, len(self.object_ids) + 1, dtype=np.uint16)
+        self._geom_label[:n_geom] = body_to_label[self.model.geom_bodyid]
+        self._renderer = None
+        if robot_arm:
+            self._joint_qpos = np.array([self.model.joint(n).qposadr[0] for n in robot.JOINT_NAMES])
+            self._finger_qpos = np.array([self.model.joint(n).qposadr[0] for n in robot.FINGER_JOINT_NAMES])
+            self._joint_dof = np.array([self.model.joint(n).dofadr[0] for n in robot.JOINT_NAMES])
+            self.set_robot_state(robot.HOME_Q, robot.GRIPPER_OPEN_M)
+        mujoco.mj_forward(self.model, self.data)
+
+    # --- robot -------------------------------------------------------------------------------
+    def set_robot_state(self, q, gripper_m: float) -> None:
+        self.data.qpos[self._joint_qpos] = q
+        self.data.qpos[self._finger_qpos] = gripper_m
+        self.data.ctrl[:7] = q
+        self.data.ctrl[7] = gripper_m
+        mujoco.mj_forward(self.model, self.data)
+
+    def joint_positions(self) -> np.ndarray:
+        """Arm joint angles (7,) then the finger opening (m)."""
+        return np.concatenate([self.data.qpos[self._joint_qpos], self.data.qpos[self._finger_qpos[:1]]])
+
+    def joint_velocities(self) -> np.ndarray:
+        return np.concatenate([self.data.qvel[self._joint_dof], [0.0]])
+
+    def execute(self, times_s: np.ndarray, positions: np.ndarray, control_dt_s: float = 0.01) -> None:
+        """Track a joint trajectory (times from now, positions (N,8): 7 joints + finger opening) with
+        the position servos, interpolated every control_dt_s; physics runs in C between updates."""
+        times_s, positions = np.asarray(times_s, float), np.asarray(positions, float)
+        start = np.concatenate([self.data.ctrl[:8]])
+        times_s = np.concatenate([[0.0], times_s])
+        positions = np.vstack([start, positions])
+        ticks = np.arange(control_dt_s, times_s[-1] + 1e-9, control_dt_s)
+        targets = np.stack([np.interp(ticks, times_s, positions[:, k]) for k in range(8)], 1)
+        lo, hi = self.model.actuator_ctrlrange[:8].T
+        targets = np.clip(targets, lo, hi)
+        substeps = max(1, int(round(control_dt_s / self.model.opt.timestep)))
+        for target in targets:
+            self.data.ctrl[:8] = target
+            mujoco.mj_step(self.model, self.data, nstep=substeps)
+
+    # --- physics -----------------------------------------------------------------------------
+    def settle(self, seconds: float = 2.0) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=int(round(seconds / self.model.opt.timestep)))
+
+    def object_poses(self) -> list[np.ndarray]:
+        return [body_pose(self.data, int(b)) for b in self.object_ids]
+
+    # --- rendering ---------------------------------------------------------------------------
+    def _place_camera(self, T_world_camera: np.ndarray) -> None:
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, (T_world_camera[:3, :3] @ OPTICAL_TO_MUJOCO).reshape(9))
+        self.model.cam_pos[self._camera_id] = T_world_camera[:3, 3]
+        self.model.cam_quat[self._camera_id] = quat
+        mujoco.mj_camlight(self.model, self.data)
+
+    def render(
+        self, T_world_camera: np.ndarray, noise: DepthNoise | None = None, rng: np.random.Generator | None = None,
+        with_visibility: bool = True, stamp_s: float = 0.0,
+    ) -> RgbdFrame:
+        """RGB (uint8), depth (float32 m, noisy unless noise.enabled is False), instance labels and
+        each object's visible fraction (visible pixels / pixels when rendered alone)."""
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+        r = self._renderer
+        self._place_camera(np.asarray(T_world_camera, dtype=np.float64))
+        r.update_scene(self.data, camera=self._camera_id)
+        rgb = r.render().copy()
+        r.enable_depth_rendering()
+        depth = r.render().astype(np.float32)
+        r.disable_depth_rendering()
+        r.enable_segmentation_rendering()
+        seg = r.render()
+        r.disable_segmentation_rendering()
+        geom = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
+        labels = self._geom_label[geom]
+        noise = DepthNoise() if noise is None else noise
+        depth = apply_depth_noise(depth, self.K, rng if rng is not None else np.random.default_rng(), noise)
+        visible = self.visible_fractions(labels, T_world_camera) if with_visibility else np.full(
+            len(self.object_ids), -1.0)
+        return RgbdFrame(rgb, depth, labels, self.K.copy(), np.array(T_world_camera, float), visible, stamp_s)
+
+    def visible_fractions(self, labels: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
+        counts = np.bincount(labels.ravel(), minlength=len(self.object_ids) + 1)[1:]
+        fractions = np.zeros(len(self.object_ids))
+        for i, (placed, T) in enumerate(zip(self.scene.objects, self.object_poses(), strict=True)):
+            mesh = placed.model.mesh
+            vertices = (mesh.vertices * placed.scale) @ T[:3, :3].T + T[:3, 3]
+            alone = silhouette(vertices, mesh.faces, self.K, T_world_camera, self.width, self.height).sum()
+            fractions[i] = min(1.0, counts[i] / alone) if alone > 0 else 0.0
+        return fractions
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
