@@ -1,0 +1,368 @@
+"""Four-channel voxel grids (paper Section 3.1) and ground-truth voxelization.
+
+For object o the grid F_o has four channels: F1 the voxels of o's own points, F2 the voxels of all
+other segmented objects' points, F3 voxels observed to be empty (the camera ray through the voxel
+ends behind it), F4 voxels that are unobserved (occluded, outside the image or without a depth return).
+Voxels holding points are in F1 or F2 and in neither F3 nor F4.
+
+The grid is axis-aligned with the gravity-aligned world frame, centred horizontally at o's observed
+centre of mass, has side k * delta_o (delta_o: largest distance between o's points) and its bottom
+face lies on the table plane under o, so that the table is the z = 0 plane in voxel coordinates.
+Voxel (i, j, l) covers [origin + (i, j, l) * voxel_size_m, origin + (i + 1, j + 1, l + 1) * voxel_size_m).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+CHANNELS = ("own", "others", "observed_empty", "unobserved")
+DEFAULT_RESOLUTION = 32
+DEFAULT_K = 4.0
+MIN_OBJECT_POINTS = 10
+MIN_DIAMETER_M = 0.01
+SUPPORT_BIN_M = 0.005
+SUPPORT_TOLERANCE_M = 0.01
+MAX_HULL_POINTS = 8192
+
+
+class GridInputError(ValueError):
+    """The frame cannot be turned into grids: bad shapes, non-finite pose or intrinsics."""
+
+
+class EmptyObjectError(GridInputError):
+    """The object has too few valid depth points to build a grid."""
+
+
+@dataclass(frozen=True, eq=False)
+class GridFrame:
+    """Placement of a d^3 grid in the world frame (metres). table_source says where the table
+    height came from: 'local' (support plane under the object), 'frame' (frame-wide table),
+    'given' (caller's value) or 'object' (lowest observed object point; no table seen)."""
+
+    origin_world: np.ndarray
+    voxel_size_m: float
+    resolution: int
+    table_height_m: float
+    table_source: str = "local"
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, GridFrame):
+            return NotImplemented
+        return (
+            np.array_equal(np.asarray(self.origin_world), np.asarray(other.origin_world))
+            and self.voxel_size_m == other.voxel_size_m
+            and self.resolution == other.resolution
+            and self.table_height_m == other.table_height_m
+        )
+
+    __hash__ = None
+
+    @property
+    def side_m(self) -> float:
+        return self.voxel_size_m * self.resolution
+
+    def voxel_centers_world(self) -> np.ndarray:
+        """(d, d, d, 3) world coordinates of the voxel centres, metres."""
+        axis = (np.arange(self.resolution) + 0.5) * self.voxel_size_m
+        x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+        return np.stack([x, y, z], -1) + np.asarray(self.origin_world, dtype=np.float64)
+
+    def world_to_voxel(self, points_world: np.ndarray) -> np.ndarray:
+        """(N, 3) world points -> (N, 3) continuous voxel coordinates; voxel (i, j, l) spans
+        [i, i + 1) x [j, j + 1) x [l, l + 1), so floor() gives the index and centres sit at +0.5."""
+        points_world = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        return (points_world - np.asarray(self.origin_world)) / self.voxel_size_m
+
+    def voxel_to_world(self, voxel_coords: np.ndarray) -> np.ndarray:
+        """(N, 3) continuous voxel coordinates -> (N, 3) world points, metres."""
+        voxel_coords = np.asarray(voxel_coords, dtype=np.float64).reshape(-1, 3)
+        return voxel_coords * self.voxel_size_m + np.asarray(self.origin_world)
+
+    def voxel_indices(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) world points -> ((M, 3) int64 indices of the points inside, (N,) inside mask)."""
+        index = np.floor(self.world_to_voxel(points_world)).astype(np.int64)
+        inside = np.all((index >= 0) & (index < self.resolution), axis=1)
+        return index[inside], inside
+
+
+@dataclass
+class FrameGrids:
+    """Grids of the objects of one frame: grids[n] belongs to object_ids[n]; objects that could not
+    be gridded are in errors (id -> reason) and have no grid."""
+
+    grids: np.ndarray
+    frames: list[GridFrame]
+    object_ids: list[int]
+    errors: dict[int, str]
+
+
+def _validate_frame(depth_m, K, T_world_camera, labels):
+    depth_m = np.asarray(depth_m, dtype=np.float32)
+    labels = np.asarray(labels)
+    if depth_m.ndim != 2 or depth_m.size == 0:
+        raise GridInputError(f"depth must be a non-empty HxW image, got shape {depth_m.shape}")
+    if labels.shape != depth_m.shape:
+        raise GridInputError(f"labels shape {labels.shape} differs from depth shape {depth_m.shape}")
+    if not np.issubdtype(labels.dtype, np.integer):
+        raise GridInputError(f"labels must be an integer image, got {labels.dtype}")
+    K = np.asarray(K, dtype=np.float64)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise GridInputError(f"K must be a finite 3x3 pinhole matrix with fx, fy > 0, got {K.tolist()}")
+    T = np.asarray(T_world_camera, dtype=np.float64)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise GridInputError("T_world_camera must be a finite 4x4 transform")
+    if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-4) or np.linalg.det(T[:3, :3]) < 0:
+        raise GridInputError("T_world_camera rotation is not orthonormal")
+    depth_m = np.where(np.isfinite(depth_m) & (depth_m > 0), depth_m, np.float32(0.0))
+    return depth_m, K, T, labels
+
+
+def point_set_diameter(points: np.ndarray) -> float:
+    """Largest distance between two points (exact for <= MAX_HULL_POINTS points: pairwise distances
+    of the convex hull's vertices; larger sets are subsampled with a fixed stride)."""
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) < 2:
+        return 0.0
+    if len(points) > MAX_HULL_POINTS:
+        points = points[:: int(np.ceil(len(points) / MAX_HULL_POINTS))]
+    try:
+        candidates = points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        candidates = points
+        if len(candidates) > 512:
+            extent = candidates.max(0) - candidates.min(0)
+            return float(np.linalg.norm(extent))
+    diff = candidates[:, None, :] - candidates[None, :, :]
+    return float(np.sqrt(np.max(np.einsum("ijk,ijk->ij", diff, diff))))
+
+
+def support_height(z_values: np.ndarray, max_height_m: float, min_points: int = 20) -> float | None:
+    """Height of the highest horizontal support level at or below max_height_m.
+
+    z_values are heights of table/background points. A level is a SUPPORT_BIN_M histogram bin (summed
+    with its neighbours) holding at least min_points and at least a quarter of the best bin's count;
+    the highest such level wins (objects on a shelf rest on the shelf, not on the floor), refined to
+    the median height of its points. None when no level qualifies."""
+    z = np.asarray(z_values, dtype=np.float64)
+    z = z[z <= max_height_m]
+    if len(z) < min_points:
+        return None
+    lo = z.min()
+    bins = np.floor((z - lo) / SUPPORT_BIN_M).astype(np.int64)
+    counts = np.bincount(bins)
+    smoothed = counts + np.concatenate([[0], counts[:-1]]) + np.concatenate([counts[1:], [0]])
+    threshold = max(min_points, 0.25 * smoothed.max())
+    good = np.nonzero(smoothed >= threshold)[0]
+    if len(good) == 0:
+        return None
+    top = good[-1]
+    near = np.abs(bins - top) <= 1
+    return float(np.median(z[near]))
+
+
+class FrameObservation:
+    """One RGB-D frame back-projected once and shared by the grids of all its objects."""
+
+    def __init__(self, depth_m, K, T_world_camera, labels, background_stride: int = 2):
+        self.depth_m, self.K, self.T_world_camera, labels = _validate_frame(depth_m, K, T_world_camera, labels)
+        self.height, self.width = self.depth_m.shape
+        self.T_camera_world = np.linalg.inv(self.T_world_camera)
+        valid = self.depth_m > 0
+        v, u = np.nonzero(valid & (labels > 0))
+        object_labels = labels[v, u].astype(np.int64)
+        order = np.argsort(object_labels, kind="stable")
+        v, u = v[order], u[order]
+        self.object_points = self._backproject(v, u)
+        self.object_point_labels = object_labels[order]
+        s = int(background_stride)
+        vb, ub = np.nonzero(valid[::s, ::s] & (labels[::s, ::s] == 0))
+        background = self._backproject(vb * s, ub * s)
+        self.background_x, self.background_y = background[:, 0].copy(), background[:, 1].copy()
+        self.background_z = background[:, 2].copy()
+        ids, starts, counts = np.unique(self.object_point_labels, return_index=True, return_counts=True)
+        self._slices = {int(i): slice(int(a), int(a + c)) for i, a, c in zip(ids, starts, counts, strict=True)}
+        self.object_ids = [int(i) for i in ids]
+
+    def _backproject(self, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Pixels (rows v, columns u) with valid depth -> (N, 3) world points, metres."""
+        z = self.depth_m[v, u].astype(np.float64)
+        x = (u - self.K[0, 2]) / self.K[0, 0] * z
+        y = (v - self.K[1, 2]) / self.K[1, 1] * z
+        R, t = self.T_world_camera[:3, :3], self.T_world_camera[:3, 3]
+        return np.stack([x, y, z], 1) @ R.T + t
+
+    def points_of(self, object_id: int) -> np.ndarray:
+        sl = self._slices.get(int(object_id))
+        return self.object_points[sl] if sl is not None else np.zeros((0, 3))
+
+    def frame_table_height(self, max_height_m: float) -> float | None:
+        return support_height(self.background_z, max_height_m, min_points=50)
+
+    def grid_frame(self, object_id: int, resolution: int, k: float, table_height_m: float | None) -> GridFrame:
+        own = self.points_of(object_id)
+        if len(own) < MIN_OBJECT_POINTS:
+            raise EmptyObjectError(
+                f"object {object_id} has {len(own)} valid depth points (< {MIN_OBJECT_POINTS}); cannot build a grid"
+            )
+        centre = own.mean(0)
+        side = k * max(point_set_diameter(own), MIN_DIAMETER_M)
+        voxel = side / resolution
+        xy_min = centre[:2] - side / 2
+        bottom = float(np.percentile(own[:, 2], 2.0))
+        max_support = bottom + SUPPORT_TOLERANCE_M
+        source = "given"
+        table = table_height_m
+        if table is None:
+            x, y = self.background_x, self.background_y
+            inside = (x >= xy_min[0]) & (x < xy_min[0] + side) & (y >= xy_min[1]) & (y < xy_min[1] + side)
+            table, source = support_height(self.background_z[inside], max_support, min_points=10), "local"
+        if table is None:
+            table, source = self.frame_table_height(max_support), "frame"
+        if table is None or not np.isfinite(table):
+            table, source = float(own[:, 2].min()), "object"
+        origin = np.array([xy_min[0], xy_min[1], table], dtype=np.float64)
+        return GridFrame(origin, float(voxel), int(resolution), float(table), source)
+
+    def grid(self, object_id: int, frame: GridFrame) -> np.ndarray:
+        d = frame.resolution
+        grid = np.zeros((4, d, d, d), dtype=np.float32)
+        index, inside = frame.voxel_indices(self.object_points)
+        is_own = self.object_point_labels[inside] == object_id
+        own_idx, other_idx = index[is_own], index[~is_own]
+        grid[0][own_idx[:, 0], own_idx[:, 1], own_idx[:, 2]] = 1.0
+        grid[1][other_idx[:, 0], other_idx[:, 1], other_idx[:, 2]] = 1.0
+        observed_empty = self.observed_empty(frame)
+        occupied = (grid[0] > 0) | (grid[1] > 0)
+        grid[2] = observed_empty & ~occupied
+        grid[3] = ~observed_empty & ~occupied
+        return grid
+
+    def observed_empty(self, frame: GridFrame) -> np.ndarray:
+        """(d, d, d) bool: the camera ray through the voxel centre returned a depth beyond it, i.e. the
+        ray traversed the voxel before hitting a surface (per-voxel form of pixel-ray traversal)."""
+        d = frame.resolution
+        axis = (np.arange(d) + 0.5) * frame.voxel_size_m
+        R, t = self.T_camera_world[:3, :3], self.T_camera_world[:3, 3]
+        base = R @ np.asarray(frame.origin_world) + t
+        cam = (
+            base
+            + (axis[:, None] * R[:, 0])[:, None, None, :]
+            + (axis[:, None] * R[:, 1])[None, :, None, :]
+            + (axis[:, None] * R[:, 2])[None, None, :, :]
+        )
+        z = cam[..., 2]
+        in_front = z > 1e-6
+        safe_z = np.where(in_front, z, 1.0)
+        u = np.floor(cam[..., 0] / safe_z * self.K[0, 0] + self.K[0, 2])
+        v = np.floor(cam[..., 1] / safe_z * self.K[1, 1] + self.K[1, 2])
+        in_image = in_front & (u >= 0) & (u < self.width) & (v >= 0) & (v < self.height)
+        ui = np.where(in_image, u, 0).astype(np.int64)
+        vi = np.where(in_image, v, 0).astype(np.int64)
+        depth = self.depth_m[vi, ui]
+        return in_image & (depth > 0) & (z < depth)
+
+
+def four_channel_grid(
+    depth_m,
+    K,
+    T_world_camera,
+    labels,
+    object_id: int,
+    resolution: int = DEFAULT_RESOLUTION,
+    k: float = DEFAULT_K,
+    table_height_m: float | None = None,
+) -> tuple[np.ndarray, GridFrame]:
+    """Four-channel grid of one object -> (float32 [4, d, d, d], GridFrame).
+
+    depth_m: HxW metres along the optical axis (0/NaN = no return); K: 3x3 pixels; T_world_camera:
+    4x4 optical-frame pose; labels: HxW instance ids (0 = table/background). table_height_m=None
+    estimates the support plane under the object. Raises GridInputError / EmptyObjectError."""
+    _check_settings(resolution, k)
+    observation = FrameObservation(depth_m, K, T_world_camera, labels)
+    frame = observation.grid_frame(int(object_id), int(resolution), float(k), table_height_m)
+    return observation.grid(int(object_id), frame), frame
+
+
+def frame_grids(
+    depth_m,
+    K,
+    T_world_camera,
+    labels,
+    object_ids=None,
+    resolution: int = DEFAULT_RESOLUTION,
+    k: float = DEFAULT_K,
+    table_height_m: float | None = None,
+) -> FrameGrids:
+    """Grids of all objects of one frame (object_ids=None: every label > 0 with depth points), sharing
+    the back-projection. Per-object failures (too few points) go to errors instead of raising."""
+    _check_settings(resolution, k)
+    observation = FrameObservation(depth_m, K, T_world_camera, labels)
+    ids = observation.object_ids if object_ids is None else [int(i) for i in object_ids]
+    grids, frames, ok_ids, errors = [], [], [], {}
+    for object_id in ids:
+        if object_id <= 0:
+            errors[object_id] = "label 0 is the table/background, not an object"
+            continue
+        try:
+            frame = observation.grid_frame(object_id, int(resolution), float(k), table_height_m)
+        except EmptyObjectError as error:
+            errors[object_id] = str(error)
+            continue
+        grids.append(observation.grid(object_id, frame))
+        frames.append(frame)
+        ok_ids.append(object_id)
+    d = int(resolution)
+    stacked = np.stack(grids) if grids else np.zeros((0, 4, d, d, d), dtype=np.float32)
+    return FrameGrids(stacked, frames, ok_ids, errors)
+
+
+def _check_settings(resolution, k):
+    if int(resolution) < 8 or int(resolution) % 8:
+        raise GridInputError(f"resolution must be a positive multiple of 8, got {resolution}")
+    if not np.isfinite(k) or k <= 1.0:
+        raise GridInputError(f"k must be a finite number > 1, got {k}")
+
+
+def voxelize_mesh(mesh_world, frame: GridFrame) -> np.ndarray:
+    """bool [d, d, d]: voxel centres inside a watertight world-frame mesh (ray parity along +z).
+
+    Every triangle is intersected with the vertical lines through the voxel-centre columns its xy
+    bounding box covers; a centre is inside when an odd number of crossings lies below it."""
+    d = frame.resolution
+    vertices = frame.world_to_voxel(np.asarray(mesh_world.vertices)) - 0.5
+    triangles = vertices[np.asarray(mesh_world.faces, dtype=np.int64)]
+    occupancy = np.zeros((d, d, d), dtype=bool)
+    if len(triangles) == 0:
+        return occupancy
+    jitter = np.array([1.234567e-6, 2.345678e-6])
+    xy = triangles[:, :, :2] - jitter
+    lo = np.clip(np.ceil(xy.min(1)), 0, d).astype(np.int64)
+    hi = np.clip(np.floor(xy.max(1)), -1, d - 1).astype(np.int64)
+    n_i = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
+    n_j = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
+    per_triangle = n_i * n_j
+    total = int(per_triangle.sum())
+    if total == 0:
+        return occupancy
+    tri = np.repeat(np.arange(len(triangles)), per_triangle)
+    offset = np.arange(total) - np.repeat(np.cumsum(per_triangle) - per_triangle, per_triangle)
+    col_i = lo[tri, 0] + offset // n_j[tri]
+    col_j = lo[tri, 1] + offset % n_j[tri]
+    a, b, c = xy[tri, 0], xy[tri, 1], xy[tri, 2]
+    p = np.stack([col_i, col_j], 1).astype(np.float64)
+    v0, v1, v2 = b - a, c - a, p - a
+    den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+    nondegenerate = np.abs(den) > 1e-12
+    den = np.where(nondegenerate, den, 1.0)
+    w1 = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
+    w2 = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
+    w0 = 1.0 - w1 - w2
+    hit = nondegenerate & (w0 >= 0) & (w1 >= 0) & (w2 >= 0)
+    z = triangles[tri, :, 2]
+    z_hit = (w0 * z[:, 0] + w1 * z[:, 1] + w2 * z[:, 2])[hit]
+    first_above = np.clip(np.floor(z_hit) + 1, 0, d).astype(np.int64)
+    crossings = np.zeros((d, d, d + 1), dtype=np.int32)
+    np.add.at(crossings, (col_i[hit], col_j[hit], first_above), 1)
+    occupancy[:] = (np.cumsum(crossings, axis=2)[:, :, :d] % 2) == 1
+    return occupancy
