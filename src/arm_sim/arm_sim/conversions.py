@@ -172,3 +172,33 @@ def K_from_camera_info(info: CameraInfo) -> np.ndarray:
     if not np.all(np.isfinite(K)) or fx <= 0 or fy <= 0 or cx <= 0 or cy <= 0:
         raise ConversionError(f"invalid intrinsics fx={fx} fy={fy} cx={cx} cy={cy}")
     return K
+
+
+def reconstructed_object_msg(
+    object_id: int, mesh_world, convex_parts_world=(), visible_fraction: float = -1.0, method: str = "",
+    grid=None,
+):
+    """World-frame meshes (trimesh or (V, F)) -> arm_interfaces/ReconstructedObject. The object frame is
+    parallel to the world frame with its origin at the mesh centroid (see the message definition)."""
+    from arm_interfaces.msg import ReconstructedObject
+
+    def as_vf(mesh):
+        return (np.asarray(mesh.vertices), np.asarray(mesh.faces)) if hasattr(mesh, "vertices") else mesh
+
+    vertices, faces = as_vf(mesh_world)
+    centre = np.asarray(vertices, dtype=np.float64).mean(axis=0) if len(vertices) else np.zeros(3)
+    msg = ReconstructedObject(id=int(object_id), visible_fraction=float(visible_fraction), method=method)
+    T = np.eye(4)
+    T[:3, 3] = centre
+    msg.pose = matrix_to_pose(T)
+    msg.mesh = mesh_to_msg(np.asarray(vertices) - centre, faces)
+    msg.convex_parts = [mesh_to_msg(np.asarray(v) - centre, f) for v, f in map(as_vf, convex_parts_world)]
+    if grid is not None:
+        msg.grid = grid
+    return msg
+
+
+def reconstructed_object_from_msg(msg) -> tuple[np.ndarray, tuple, list]:
+    """arm_interfaces/ReconstructedObject -> (T_world_object, (V, F) mesh, [(V, F)] convex parts), object frame."""
+    T = pose_to_matrix(msg.pose)
+    return T, msg_to_mesh(msg.mesh), [msg_to_mesh(p) for p in msg.convex_parts]

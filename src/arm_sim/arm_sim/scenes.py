@@ -118,7 +118,7 @@ def cluttered_scene(
 
 def task_camera_pose(table_height_m: float = 0.0) -> np.ndarray:
     """The fixed robot-side view of the manipulation tasks: across the table, towards the robot."""
-    return look_at((0.7, 0.0, table_height_m + 0.5), (0.0, 0.0, table_height_m + 0.05))
+    return look_at((0.8, 0.0, table_height_m + 0.32), (0.0, 0.0, table_height_m + 0.05))
 
 
 def _visible_fraction(scene: Scene, index: int, T_world_camera: np.ndarray) -> float:
@@ -162,7 +162,7 @@ def task_scene(
         tries += 1
         if tries > max_tries:
             raise RuntimeError(f"could not reach visible fraction in [{lo}, {hi}) (last {visible:.2f})")
-        candidate, disc = try_add(TASK_TARGET_XY[0] + 0.18, 0.06, 0.1)
+        candidate, disc = try_add(TASK_TARGET_XY[0] + 0.13, 0.04, 0.1)
         if candidate is None:
             continue
         trial = Scene(scene.objects + [candidate], scene.table_height_m, scene.table_half_extent_m, scene.table_rgba)

@@ -1,0 +1,92 @@
+"""The sim node's pure core: a seeded scene, its simulated world, a camera and trajectory tracking."""
+
+import time
+
+import numpy as np
+
+from arm_sim import robot
+from arm_sim.camera import look_at
+from arm_sim.depth_noise import DepthNoise
+from arm_sim.objects import object_pool
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
+
+COMMAND_NAMES = tuple(robot.JOINT_NAMES) + (robot.FINGER_JOINT_NAMES[0],)
+
+
+class SimSession:
+    """A seeded cluttered scene with the robot, stepped in simulated time and rendered on demand."""
+
+    def __init__(self, seed=0, objects=None, split="heldout", n_objects=None, camera_eye=(0.7, 0.0, 0.5),
+                 camera_target=(0.0, 0.0, 0.05), width=640, height=480, fovy_deg=45.0, depth_noise=True):
+        self.rng = np.random.default_rng(seed)
+        pool = object_pool(objects, split=split, seed=seed)
+        self.scene = cluttered_scene(pool, self.rng, n_objects=n_objects)
+        self.world = SimWorld(self.scene, robot_arm=True, width=width, height=height, fovy_deg=fovy_deg)
+        self.world.settle(0.5)
+        self.T_world_camera = look_at(camera_eye, camera_target)
+        self.noise = DepthNoise(enabled=bool(depth_noise))
+        self.time_s = 0.0
+
+    def command(self) -> np.ndarray:
+        """The current servo targets: 7 joint angles (rad) and the finger opening (m)."""
+        return self.world.data.ctrl[:8].copy()
+
+    def step(self, dt_s: float, target: np.ndarray | None = None) -> None:
+        if target is not None:
+            lo, hi = self.world.model.actuator_ctrlrange[:8].T
+            self.world.data.ctrl[:8] = np.clip(target, lo, hi)
+        import mujoco
+
+        substeps = max(1, int(round(dt_s / self.world.model.opt.timestep)))
+        mujoco.mj_step(self.world.model, self.world.data, nstep=substeps)
+        self.time_s += substeps * self.world.model.opt.timestep
+
+    def render(self):
+        start = time.perf_counter()
+        frame = self.world.render(self.T_world_camera, noise=self.noise, rng=self.rng, stamp_s=self.time_s)
+        return frame, 1e3 * (time.perf_counter() - start)
+
+    def visible_fractions(self) -> np.ndarray:
+        return self.world.render(self.T_world_camera, noise=DepthNoise(enabled=False)).visible_fraction
+
+    def ground_truth_meshes(self):
+        """[(world mesh, [world convex parts])] of every object at its current pose."""
+        out = []
+        for placed, T in zip(self.scene.objects, self.world.object_poses(), strict=True):
+            mesh = placed.model.mesh.copy()
+            mesh.apply_scale(placed.scale)
+            mesh.apply_transform(T)
+            parts = []
+            for vertices, faces in placed.convex_parts_local():
+                parts.append((vertices @ T[:3, :3].T + T[:3, 3], faces))
+            out.append((mesh, parts))
+        return out
+
+    def close(self) -> None:
+        self.world.close()
+
+
+def trajectory_targets(joint_names, times_s, positions, current: np.ndarray, dt_s: float,
+                       max_duration_s: float = 120.0) -> np.ndarray:
+    """Per-tick servo targets (N, 8) that linearly interpolate a joint trajectory from the current
+    command. Joints missing from joint_names keep their current target. Raises ValueError."""
+    names = list(joint_names)
+    unknown = [n for n in names if n not in COMMAND_NAMES]
+    if unknown:
+        raise ValueError(f"unknown joints {unknown}; expected a subset of {list(COMMAND_NAMES)}")
+    times_s = np.asarray(times_s, dtype=np.float64)
+    positions = np.asarray(positions, dtype=np.float64).reshape(len(times_s), len(names))
+    if len(times_s) == 0:
+        raise ValueError("trajectory has no points")
+    if not (np.all(np.isfinite(times_s)) and np.all(np.isfinite(positions))):
+        raise ValueError("trajectory has non-finite times or positions")
+    if np.any(np.diff(times_s) <= 0) or times_s[0] < 0 or times_s[-1] > max_duration_s:
+        raise ValueError("time_from_start must increase strictly, start >= 0 and end within the duration limit")
+    columns = [COMMAND_NAMES.index(n) for n in names]
+    full = np.tile(current, (len(times_s), 1))
+    full[:, columns] = positions
+    knots_t = np.concatenate([[0.0], times_s])
+    knots_q = np.vstack([current, full])
+    ticks = np.arange(dt_s, times_s[-1] + 1e-9, dt_s)
+    return np.stack([np.interp(ticks, knots_t, knots_q[:, k]) for k in range(knots_q.shape[1])], axis=1)

@@ -1,0 +1,114 @@
+"""Node plumbing shared by every ARM node: QoS profiles, declared parameters, rate-limited error
+logs, diagnostics and a clean main loop. Imports rclpy: node modules only, never the cores."""
+
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+
+def sensor_qos(reliability: str = "best_effort", depth: int = 2) -> QoSProfile:
+    """The sensor-data profile (keep-last, volatile) with a configurable reliability."""
+    if reliability not in ("best_effort", "reliable"):
+        raise ValueError(f"reliability must be 'best_effort' or 'reliable', got '{reliability}'")
+    qos = QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth, durability=qos_profile_sensor_data.durability,
+        reliability=ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE,
+    )
+    return qos
+
+
+def latched_qos(depth: int = 1) -> QoSProfile:
+    """Reliable + transient-local: late subscribers still get the last message (meshes, ground truth)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
+def declare(node, name: str, default, description: str, low=None, high=None, choices=None):
+    """Declare a parameter with a descriptor (and range) and return its value, validated."""
+    descriptor = ParameterDescriptor(description=description)
+    if low is not None and isinstance(default, bool) is False:
+        if isinstance(default, int):
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
+        elif isinstance(default, float):
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)
+            ]
+    if choices:
+        descriptor.additional_constraints = "one of: " + ", ".join(choices)
+    value = node.declare_parameter(name, default, descriptor).value
+    if choices and value not in choices:
+        raise ValueError(f"parameter '{name}'='{value}' is not one of {choices}")
+    return value
+
+
+def reject_invalid_choices(node, choices_by_name: dict):
+    """Add a parameter callback that rejects values outside each parameter's choices at run time."""
+
+    def check(params):
+        for p in params:
+            allowed = choices_by_name.get(p.name)
+            if allowed and p.value not in allowed:
+                return SetParametersResult(successful=False, reason=f"{p.name} must be one of {allowed}")
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(check)
+
+
+class RateLimitedErrors:
+    """Log each distinct error cause at most once per period_s, counting the suppressed repeats."""
+
+    def __init__(self, logger, period_s: float = 5.0):
+        self.logger, self.period_s = logger, period_s
+        self._last: dict[str, float] = {}
+        self.counts: dict[str, int] = {}
+
+    def error(self, cause: str, message: str) -> None:
+        self.counts[cause] = self.counts.get(cause, 0) + 1
+        now = time.monotonic()
+        if now - self._last.get(cause, -1e9) >= self.period_s:
+            self._last[cause] = now
+            self.logger.error(f"{message} [{cause}, seen {self.counts[cause]}x]")
+
+
+def diagnostics_msg(node, name: str, values: dict, level=DiagnosticStatus.OK, message: str = "ok") -> DiagnosticArray:
+    status = DiagnosticStatus(
+        level=level, name=f"{node.get_name()}: {name}", message=message, hardware_id=node.get_fully_qualified_name(),
+        values=[KeyValue(key=str(k), value=f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in values.items()],
+    )
+    array = DiagnosticArray(status=[status])
+    array.header.stamp = node.get_clock().now().to_msg()
+    return array
+
+
+def spin_node(node_factory, args=None, executor_factory=None) -> int:
+    """Run a node until SIGINT/SIGTERM and shut down cleanly. Returns the process exit code."""
+    rclpy.init(args=args)  # installs rclpy's SIGINT/SIGTERM handlers: spin then raises ExternalShutdownException
+    node = None
+    code = 0
+    try:
+        node = node_factory()
+        if executor_factory is None:
+            rclpy.spin(node)
+        else:
+            executor = executor_factory()
+            executor.add_node(node)
+            executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as error:  # invalid parameters: a clear message, a non-zero exit
+        print(f"[{getattr(node, 'get_name', lambda: 'node')()}] invalid configuration: {error}", flush=True)
+        code = 2
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

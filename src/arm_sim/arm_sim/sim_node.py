@@ -1,0 +1,139 @@
+"""sim_node: owns the ground-truth MuJoCo world, publishes RGB-D + camera + joint states + ground
+truth, executes JointTrajectory commands, and publishes /clock (simulated time)."""
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory
+
+from arm_interfaces.msg import ReconstructedObjectArray
+from arm_sim import robot
+from arm_sim.conversions import camera_info_from_K, matrix_to_pose, numpy_to_image, reconstructed_object_msg
+from arm_sim.core import SimSession, trajectory_targets
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, sensor_qos, spin_node
+
+
+class SimNode(Node):
+    def __init__(self):
+        super().__init__("sim_node")
+        seed = declare(self, "seed", 0, "Scene seed", 0, 2**31 - 1)
+        objects = declare(self, "objects", "", "Folder of .obj/.stl/.ply meshes (metres); '' = procedural library")
+        split = declare(self, "split", "heldout", "Procedural categories", choices=["train", "heldout"])
+        n_objects = declare(self, "n_objects", 8, "Objects in the scene; 0 = uniform(3, 20)", 0, 40)
+        self.camera_rate_hz = declare(self, "camera_rate_hz", 2.0, "RGB-D publish rate (sim time)", 0.1, 30.0)
+        self.physics_rate_hz = declare(self, "physics_rate_hz", 50.0, "Control/physics tick rate", 10.0, 500.0)
+        eye = declare(self, "camera_eye", [0.7, 0.0, 0.5], "Camera position in the world, metres")
+        target = declare(self, "camera_target", [0.0, 0.0, 0.05], "Point the camera looks at, metres")
+        self.depth_noise = declare(self, "depth_noise", True, "Apply the depth-sensor noise model")
+        width = declare(self, "width", 640, "Image width, pixels", 64, 1920)
+        height = declare(self, "height", 480, "Image height, pixels", 48, 1080)
+        fovy = declare(self, "fovy_deg", 45.0, "Vertical field of view, degrees", 10.0, 120.0)
+        self.world_frame = declare(self, "world_frame_id", "world", "World frame id")
+        self.camera_frame = declare(self, "camera_frame_id", "camera_color_optical_frame", "Optical frame id")
+        reliability = declare(self, "image_reliability", "reliable", "Image QoS reliability",
+                              choices=["reliable", "best_effort"])
+        if len(eye) != 3 or len(target) != 3 or not np.all(np.isfinite(eye + target)):
+            raise ValueError("camera_eye and camera_target must be 3 finite numbers each")
+
+        self.session = SimSession(
+            seed=seed, objects=objects or None, split=split, n_objects=n_objects or None,
+            camera_eye=eye, camera_target=target, width=width, height=height, fovy_deg=fovy,
+            depth_noise=self.depth_noise,
+        )
+        self.errors = RateLimitedErrors(self.get_logger())
+        qos = sensor_qos(reliability)
+        self.pub_rgb = self.create_publisher(Image, "camera/color/image_raw", qos)
+        self.pub_depth = self.create_publisher(Image, "camera/depth/image_raw", qos)
+        self.pub_info = self.create_publisher(CameraInfo, "camera/camera_info", qos)
+        self.pub_pose = self.create_publisher(PoseStamped, "camera/pose", qos)
+        self.pub_labels = self.create_publisher(Image, "sim/ground_truth/labels", qos)
+        self.pub_joints = self.create_publisher(JointState, "joint_states", 10)
+        self.pub_clock = self.create_publisher(Clock, "clock", 10)
+        self.pub_truth = self.create_publisher(ReconstructedObjectArray, "sim/ground_truth/objects", latched_qos())
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.create_subscription(JointTrajectory, "arm/joint_trajectory", self.on_trajectory, 10)
+        self._targets = None  # (N, 8) control targets, one per physics tick
+        self._next_render_s = 0.0
+        self._render_ms = 0.0
+        self.frames_published = 0
+        self.create_timer(1.0 / self.physics_rate_hz, self.on_tick)
+        self.publish_ground_truth()
+        self.get_logger().info(
+            f"sim ready: {len(self.session.scene.objects)} objects (seed {seed}), camera {self.camera_rate_hz} Hz"
+        )
+
+    def stamp(self) -> Time:
+        nanoseconds = int(round(self.session.time_s * 1e9))
+        return Time(sec=nanoseconds // 10**9, nanosec=nanoseconds % 10**9)
+
+    def header(self, frame_id: str) -> Header:
+        return Header(stamp=self.stamp(), frame_id=frame_id)
+
+    def on_trajectory(self, msg: JointTrajectory) -> None:
+        try:
+            times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points]
+            positions = [list(p.positions) for p in msg.points]
+            self._targets = trajectory_targets(
+                msg.joint_names, times, positions, self.session.command(), 1.0 / self.physics_rate_hz
+            )
+            self.get_logger().info(f"executing trajectory: {len(msg.points)} points, {len(self._targets)} ticks")
+        except ValueError as error:
+            self.errors.error("bad_trajectory", f"rejected trajectory: {error}")
+
+    def on_tick(self) -> None:
+        target = None
+        if self._targets is not None and len(self._targets):
+            target, self._targets = self._targets[0], self._targets[1:]
+        self.session.step(1.0 / self.physics_rate_hz, target)
+        self.pub_clock.publish(Clock(clock=self.stamp()))
+        self.publish_joint_state()
+        if self.session.time_s + 1e-9 >= self._next_render_s:
+            self._next_render_s = self.session.time_s + 1.0 / self.camera_rate_hz
+            self.publish_frame()
+
+    def publish_joint_state(self) -> None:
+        q, qd = self.session.world.joint_positions(), self.session.world.joint_velocities()
+        names = list(robot.JOINT_NAMES) + [robot.FINGER_JOINT_NAMES[0]]
+        self.pub_joints.publish(
+            JointState(header=self.header(""), name=names, position=q.tolist(), velocity=qd.tolist())
+        )
+
+    def publish_frame(self) -> None:
+        frame, render_ms = self.session.render()
+        self._render_ms = render_ms
+        header = self.header(self.camera_frame)
+        h, w = frame.depth_m.shape
+        self.pub_rgb.publish(numpy_to_image(frame.rgb, "rgb8", header))
+        self.pub_depth.publish(numpy_to_image(frame.depth_m, "32FC1", header))
+        self.pub_info.publish(camera_info_from_K(frame.K, w, h, header))
+        pose = matrix_to_pose(frame.T_world_camera)
+        self.pub_pose.publish(PoseStamped(header=self.header(self.world_frame), pose=pose))
+        self.pub_labels.publish(numpy_to_image(frame.labels, "16UC1", header))
+        self.frames_published += 1
+        self.pub_diag.publish(diagnostics_msg(self, "render", {
+            "render_ms": render_ms, "frames_published": self.frames_published, "sim_time_s": self.session.time_s,
+        }))
+
+    def publish_ground_truth(self) -> None:
+        msg = ReconstructedObjectArray(header=self.header(self.world_frame))
+        msg.table_height_m = float(self.session.scene.table_height_m)
+        fractions = self.session.visible_fractions()
+        for i, (mesh, parts) in enumerate(self.session.ground_truth_meshes()):
+            msg.objects.append(reconstructed_object_msg(i + 1, mesh, parts, fractions[i], "ground_truth"))
+        self.pub_truth.publish(msg)
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def main(args=None):
+    raise SystemExit(spin_node(SimNode, args))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+import numpy as np
+from arm_sim.camera import backproject, intrinsics, look_at, project_points, sample_camera_pose, silhouette
+from arm_sim.depth_noise import DepthNoise, apply_depth_noise
+
+
+def test_look_at_builds_an_optical_frame():
+    T = look_at((1.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3))
+    assert np.allclose(T[:3, 2], np.array([-1, 0, -1]) / np.sqrt(2))  # z forward
+    assert T[2, 1] < 0  # image y (down) points down in the world
+
+
+def test_projection_and_backprojection_agree():
+    K = intrinsics(640, 480, 45.0)
+    T = look_at((0.8, 0.2, 0.6), (0.0, 0.0, 0.0))
+    points = np.random.default_rng(0).uniform(-0.2, 0.2, (10, 3))
+    uv, z = project_points(points, K, T)
+    depth = np.zeros((480, 640), np.float32)
+    px = np.round(uv).astype(int)
+    depth[px[:, 1], px[:, 0]] = z
+    back = backproject(depth, K, T)[px[:, 1], px[:, 0]]
+    assert np.allclose(back, points, atol=0.004)
+
+
+def test_sampled_camera_poses_follow_the_benchmark_shell():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        T = sample_camera_pose(rng, (0.0, 0.0, 0.0))
+        distance = np.linalg.norm(T[:3, 3])
+        assert 0.125 - 1e-9 <= distance <= 1.5 + 1e-9 and T[2, 3] > 0
+
+
+def test_silhouette_covers_the_projected_square():
+    K = intrinsics(640, 480, 45.0)
+    T = look_at((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), up=(0, 1, 0))
+    vertices = np.array([[-0.1, -0.1, 0], [0.1, -0.1, 0], [0.1, 0.1, 0], [-0.1, 0.1, 0]])
+    mask = silhouette(vertices, np.array([[0, 1, 2], [0, 2, 3]]), K, T, 640, 480)
+    side_px = 0.2 * K[0, 0]
+    assert abs(mask.sum() - side_px**2) / side_px**2 < 0.03
+
+
+def test_depth_noise_grows_with_distance_and_drops_edges():
+    K = intrinsics(640, 480, 45.0)
+    rng = np.random.default_rng(0)
+    near, far = np.full((480, 640), 0.5, np.float32), np.full((480, 640), 2.0, np.float32)
+    noise = DepthNoise(random_dropout=0.0)
+    err_near = np.std(apply_depth_noise(near, K, rng, noise)[near > 0] - 0.5)
+    err_far = np.std(apply_depth_noise(far, K, rng, noise)[far > 0] - 2.0)
+    assert err_far > 3 * err_near
+    step = near.copy()
+    step[:, 320:] = 1.0
+    noisy = apply_depth_noise(step, K, rng, noise)
+    assert (noisy[:, 318:322] == 0).mean() > 0.2 and (noisy[:, 100:200] == 0).mean() < 0.01
+    assert np.array_equal(apply_depth_noise(step, K, rng, DepthNoise(enabled=False)), step)
+    bad = step.copy()
+    bad[0, :10] = np.nan
+    bad[1, :10] = -1.0
+    noisy_bad = apply_depth_noise(bad, K, rng, noise)
+    assert np.all(np.isfinite(noisy_bad)) and np.all(noisy_bad >= 0)
