@@ -4,7 +4,7 @@ truth, executes JointTrajectory commands, and publishes /clock (simulated time).
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseArray, PoseStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -54,6 +54,7 @@ class SimNode(Node):
         self.pub_labels = self.create_publisher(Image, "sim/ground_truth/labels", qos)
         self.pub_joints = self.create_publisher(JointState, "joint_states", 10)
         self.pub_clock = self.create_publisher(Clock, "clock", 10)
+        self.pub_truth_poses = self.create_publisher(PoseArray, "sim/ground_truth/poses", 10)
         self.pub_truth = self.create_publisher(ReconstructedObjectArray, "sim/ground_truth/objects", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_subscription(JointTrajectory, "arm/joint_trajectory", self.on_trajectory, 10)
@@ -114,6 +115,8 @@ class SimNode(Node):
         pose = matrix_to_pose(frame.T_world_camera)
         self.pub_pose.publish(PoseStamped(header=self.header(self.world_frame), pose=pose))
         self.pub_labels.publish(numpy_to_image(frame.labels, "16UC1", header))
+        poses = [matrix_to_pose(T) for T in self.session.world.object_poses()]
+        self.pub_truth_poses.publish(PoseArray(header=self.header(self.world_frame), poses=poses))
         self.frames_published += 1
         self.pub_diag.publish(diagnostics_msg(self, "render", {
             "render_ms": render_ms, "frames_published": self.frames_published, "sim_time_s": self.session.time_s,

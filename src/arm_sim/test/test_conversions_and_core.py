@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from sensor_msgs.msg import CameraInfo, Image
+
 from arm_sim.conversions import (
     ConversionError,
     K_from_camera_info,
@@ -13,7 +15,6 @@ from arm_sim.conversions import (
     pose_to_matrix,
 )
 from arm_sim.core import COMMAND_NAMES, trajectory_targets
-from sensor_msgs.msg import CameraInfo, Image
 
 
 def test_images_round_trip():

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 import trimesh
+
 from arm_sim.objects import CATEGORY_BUILDERS, HELDOUT_CATEGORIES, TRAIN_CATEGORIES, make_object, object_pool
 
 

@@ -1,12 +1,12 @@
 import mujoco
 import numpy as np
+
+from arm_sim import robot
 from arm_sim.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import make_object, object_pool
 from arm_sim.scenes import PlacedObject, Scene, cluttered_scene, task_scene
 from arm_sim.world import ROBOT_BASE_XY, SimWorld, build_world
-
-from arm_sim import robot
 
 
 def _base():
