@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 import torch
+
 from arm_reconstruction.checkpoint import (
     CheckpointError,
     default_checkpoint_path,

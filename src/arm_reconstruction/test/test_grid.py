@@ -3,6 +3,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+
 from arm_reconstruction.grid import (
     EmptyObjectError,
     FrameObservation,

@@ -1,0 +1,116 @@
+import numpy as np
+import pytest
+import trimesh
+
+from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
+from arm_reconstruction.meshing import (
+    drop_small_components,
+    extrude_to_table,
+    occupancy_mesh,
+    ray_carve,
+    remove_intersections,
+    to_manifold,
+)
+from arm_sim.objects import object_pool
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
+
+
+@pytest.fixture(scope="module")
+def sim_frame():
+    rng = np.random.default_rng(3)
+    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=6)
+    world = SimWorld(scene, robot_arm=False, width=320, height=240)
+    from arm_sim.camera import look_at
+
+    frame = world.render(look_at((0.7, 0.3, 0.5), scene.objects[0].T_world_object[:3, 3]), rng=rng)
+    world.close()
+    grids = frame_grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
+    truth = [scene.objects[i - 1].world_mesh() for i in grids.object_ids]
+    return grids, truth
+
+
+def test_ground_truth_occupancy_round_trips_to_a_watertight_world_mesh(sim_frame):
+    grids, truth = sim_frame
+    for frame, true_mesh in zip(grids.frames, truth, strict=True):
+        occupancy = voxelize_mesh(true_mesh, frame)
+        mesh = occupancy_mesh(occupancy.astype(np.float32), frame)
+        assert mesh.is_watertight and mesh.volume > 0 and to_manifold(mesh) is not None
+        lo, hi = np.asarray(frame.origin_world), np.asarray(frame.origin_world) + frame.side_m
+        assert np.all(mesh.bounds[0] >= lo - 1e-6) and np.all(mesh.bounds[1] <= hi + 1e-6)
+        voxel_volume = occupancy.sum() * frame.voxel_size_m**3
+        assert 0 < mesh.volume <= voxel_volume * 1.0001
+        centres = frame.voxel_centers_world()[occupancy]
+        gap = np.linalg.norm(mesh.vertices[:, None] - centres[None], axis=-1).min(1)
+        assert gap.max() <= frame.voxel_size_m * 0.5 * 3**0.5 + 1e-9
+
+
+def test_a_shape_on_the_table_touches_the_table_plane():
+    frame = GridFrame(np.array([0.0, 0.0, 0.2]), 0.01, 16, 0.2)
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[4:8, 4:8, 0:5] = 0.9
+    mesh = occupancy_mesh(probabilities, frame)
+    assert mesh.bounds[0, 2] == pytest.approx(0.2, abs=1e-9)
+    top_crossing = (0.9 - 0.5) / 0.9
+    assert mesh.bounds[1, 2] == pytest.approx(0.2 + (4.5 + top_crossing) * 0.01, abs=1e-6)
+    assert mesh.is_watertight
+
+
+def test_variants_ray_carving_and_extrusion():
+    frame = GridFrame(np.zeros(3), 0.01, 16, 0.0)
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[5:9, 5:9, 6:10] = 0.8
+    extruded = extrude_to_table(probabilities)
+    assert np.all(extruded[5:9, 5:9, 0:10] == 0.8) and extruded[5:9, 5:9, 10:].max() == 0
+    assert extruded[:5].max() == 0
+    mesh = occupancy_mesh(extruded, frame)
+    assert mesh.bounds[0, 2] == pytest.approx(0.0, abs=1e-9)
+    grid = np.zeros((4, 16, 16, 16), np.float32)
+    grid[2, 5:7] = 1.0
+    carved = ray_carve(probabilities, grid)
+    assert carved[5:7].max() == 0 and np.all(carved[7:9, 5:9, 6:10] == 0.8)
+
+
+def test_specks_are_dropped_and_bad_probabilities_are_handled():
+    frame = GridFrame(np.zeros(3), 0.01, 16, 0.0)
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[2:6, 2:6, 2:6] = 1.0
+    probabilities[12, 12, 12] = 1.0
+    cleaned = drop_small_components(probabilities, 0.5, 4)
+    assert cleaned[12, 12, 12] == 0 and cleaned[2:6, 2:6, 2:6].min() == 1
+    assert len(occupancy_mesh(probabilities, frame).split(only_watertight=False)) == 1
+    assert len(occupancy_mesh(np.zeros((16, 16, 16), np.float32), frame).faces) == 0
+    with_nan = probabilities.copy()
+    with_nan[0, 0, 0] = np.nan
+    assert occupancy_mesh(with_nan, frame).is_watertight
+    with pytest.raises(ValueError, match="shape"):
+        occupancy_mesh(np.zeros((8, 8, 8)), frame)
+    with pytest.raises(ValueError, match="threshold"):
+        occupancy_mesh(probabilities, frame, threshold=1.0)
+
+
+def test_intersections_are_cut_from_the_larger_mesh():
+    big = trimesh.creation.box((0.2, 0.2, 0.2))
+    small = trimesh.creation.box((0.1, 0.1, 0.1)).apply_translation((0.1, 0.0, 0.0))
+    apart = trimesh.creation.box((0.05, 0.05, 0.05)).apply_translation((1.0, 0.0, 0.0))
+    (big_cut, small_kept, apart_kept), cuts = remove_intersections([big, small, apart])
+    assert cuts == 1
+    assert small_kept is small and apart_kept is apart
+    assert big_cut.is_watertight
+    assert big_cut.volume == pytest.approx(0.2**3 - 0.5 * 0.1**3, rel=1e-5)
+    overlap = to_manifold(big_cut) ^ to_manifold(small_kept)
+    assert overlap.volume() < 1e-12
+    (a, b), cuts = remove_intersections([small, big])
+    assert cuts == 1 and a is small and b.volume == pytest.approx(big_cut.volume, rel=1e-6)
+
+
+def test_intersections_between_reconstructed_meshes(sim_frame):
+    grids, truth = sim_frame
+    frame = grids.frames[0]
+    occupancy = voxelize_mesh(truth[0], frame).astype(np.float32)
+    shifted = np.roll(occupancy, 2, axis=0)
+    first, second = occupancy_mesh(occupancy, frame), occupancy_mesh(0.9 * shifted + 0.05, frame)
+    (first_cut, second_cut), cuts = remove_intersections([first, second])
+    assert cuts == 1
+    overlap = to_manifold(first_cut) ^ to_manifold(second_cut)
+    assert overlap.volume() < 1e-3 * min(first.volume, second.volume)
