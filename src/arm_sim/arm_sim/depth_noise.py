@@ -25,18 +25,30 @@ class DepthNoise:
     max_range_m: float = 3.0
 
 
+_RAY_CACHE: dict = {}
+
+
+def _unit_rays(K: np.ndarray, shape: tuple) -> np.ndarray:
+    key = (shape, tuple(np.round(np.asarray(K).ravel(), 6)))
+    if key not in _RAY_CACHE:
+        h, w = shape
+        u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+        rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1).astype(np.float32)
+        _RAY_CACHE.clear()
+        _RAY_CACHE[key] = rays
+    return _RAY_CACHE[key]
+
+
 def _surface_obliquity_cos(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
     """|cos| of the angle between each pixel's viewing ray and the surface normal."""
-    h, w = depth_m.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    rays = _unit_rays(K, depth_m.shape)
     points = rays * depth_m[..., None]
-    du = np.gradient(points, axis=1)
-    dv = np.gradient(points, axis=0)
+    du = cv2.Sobel(points, cv2.CV_32F, 1, 0, ksize=1)
+    dv = cv2.Sobel(points, cv2.CV_32F, 0, 1, ksize=1)
     normal = np.cross(du, dv)
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True) + 1e-12
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    return np.abs(np.sum(normal * rays, -1))
+    dot = np.einsum("ijk,ijk->ij", normal, rays)
+    norms = np.sqrt(np.einsum("ijk,ijk->ij", normal, normal) * np.einsum("ijk,ijk->ij", rays, rays)) + 1e-12
+    return np.abs(dot) / norms
 
 
 def apply_depth_noise(depth_m: np.ndarray, K: np.ndarray, rng: np.random.Generator, noise: DepthNoise) -> np.ndarray:
@@ -50,10 +62,11 @@ def apply_depth_noise(depth_m: np.ndarray, K: np.ndarray, rng: np.random.Generat
     local_min = cv2.erode(np.where(valid, depth, np.inf).astype(np.float32), np.ones((3, 3), np.uint8))
     edge = (local_max - local_min) > noise.edge_jump_m
     grazing = _surface_obliquity_cos(depth, K) < np.cos(np.deg2rad(noise.grazing_deg))
-    drop = (edge & (rng.random(depth.shape) < noise.edge_dropout)) | grazing
-    drop |= rng.random(depth.shape) < noise.random_dropout
+    uniform = rng.random(depth.shape, dtype=np.float32)
+    drop = (edge & (uniform < noise.edge_dropout)) | grazing
+    drop |= rng.random(depth.shape, dtype=np.float32) < noise.random_dropout
     sigma = noise.axial_sigma_m + noise.axial_quadratic * (depth - 0.4) ** 2
-    noisy = depth + rng.normal(size=depth.shape).astype(np.float32) * sigma
+    noisy = depth + rng.standard_normal(depth.shape, dtype=np.float32) * sigma
     focal_baseline = float(K[0, 0]) * noise.baseline_m
     disparity = focal_baseline / np.maximum(noisy, 1e-3)
     noisy = focal_baseline / np.maximum(np.round(disparity / noise.subpixel) * noise.subpixel, 1e-6)

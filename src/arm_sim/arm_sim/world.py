@@ -159,6 +159,9 @@ class SimWorld:
         each object's visible fraction (visible pixels / pixels when rendered alone)."""
         if self._renderer is None:
             self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            flags = mujoco.mjtRndFlag
+            for flag in (flags.mjRND_SHADOW, flags.mjRND_REFLECTION, flags.mjRND_SKYBOX):
+                self._renderer.scene.flags[flag] = False
         r = self._renderer
         self._place_camera(np.asarray(T_world_camera, dtype=np.float64))
         r.update_scene(self.data, camera=self._camera_id)
