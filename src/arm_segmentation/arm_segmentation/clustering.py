@@ -1,0 +1,289 @@
+"""Instance clustering of object pixels on the organized point cloud.
+
+1. Over-segmentation: neighbouring object pixels are separated by a depth discontinuity, a concave
+   crease between their surface normals (where touching or stacked objects meet) or a sharp change
+   of chromaticity; connected components of the rest are fragments.
+2. Merging: adjacent fragments whose shared boundary is depth-continuous and whose mean
+   chromaticities agree are one object (parts of one object meet at creases too); fragments too
+   small to be an object join the neighbour they touch most.
+3. Growing: instances extend into nearby pixels the depth sensor dropped or that lie in the table
+   band (object bottoms, thin feet) when the pixel's colour matches the instance and not the table.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+@dataclass(frozen=True)
+class ClusterParams:
+    """Parameters of the edge cues, fragment merging and instance growing (metres, pixels)."""
+
+    step_px: int = 2
+    depth_jump_m: float = 0.006
+    depth_jump_per_m: float = 0.012
+    concave_threshold: float = 0.35
+    use_colour: bool = True
+    chroma_edge_threshold: float = 0.15
+    merge_chroma_threshold: float = 0.12
+    contact_radius_px: int = 2
+    min_contact_px: int = 3
+    min_fragment_px: int = 6
+    min_instance_area_m2: float = 3e-4
+    flood_iterations: int = 40
+    grow_radius_px: int = 5
+    grow_chroma_threshold: float = 0.12
+    max_instances: int = 255
+
+
+def chromaticity(rgb: np.ndarray) -> np.ndarray:
+    """Opponent chromaticity (rgb - mean(rgb)) / (|rgb| + 5) of a lightly blurred image, HxWx3 float32.
+
+    Invariant to diffuse shading; a specular highlight shortens it without turning it.
+    """
+    rgb_f = cv2.blur(rgb, (3, 3)).astype(np.float32)
+    norm = np.sqrt(np.einsum("hwc,hwc->hw", rgb_f, rgb_f))[..., None] + 5.0
+    return (rgb_f - rgb_f.mean(axis=-1, keepdims=True)) / norm
+
+
+def hue_distance(a: np.ndarray, b: np.ndarray, saturation_weight: float = 0.3) -> np.ndarray:
+    """Distance of opponent chromaticities (..., 3) that mostly ignores saturation changes.
+
+    Both vectors are shortened to the smaller length before comparing, so a shadow or a clipped
+    highlight of a surface (same hue, other saturation) stays close to it.
+    """
+    sa = np.linalg.norm(a, axis=-1, keepdims=True)
+    sb = np.linalg.norm(b, axis=-1, keepdims=True)
+    common = np.minimum(sa, sb)
+    hue = np.abs(a * (common / np.maximum(sa, 1e-6)) - b * (common / np.maximum(sb, 1e-6))).sum(axis=-1)
+    return hue + saturation_weight * np.abs(sa - sb)[..., 0]
+
+
+def depth_jump_limit(depth_m: np.ndarray, distance_px: float, params: ClusterParams) -> np.ndarray:
+    """Largest depth change (m) between pixels distance_px apart on one continuous surface."""
+    return params.depth_jump_m * max(distance_px, 1.0) / 2.0 + params.depth_jump_per_m * depth_m
+
+
+def _shifted(axis_shift):
+    dy, dx = axis_shift
+    h_a = slice(0, -dy if dy > 0 else None)
+    h_b = slice(dy, None)
+    if dx >= 0:
+        w_a, w_b = slice(0, -dx if dx > 0 else None), slice(dx, None)
+    else:
+        w_a, w_b = slice(-dx, None), slice(0, dx)
+    return (h_a, w_a), (h_b, w_b)
+
+
+def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, normal_valid, params) -> np.ndarray:
+    """HxW bool: pixels of `mask` that lie on a boundary between two different surfaces.
+
+    Depth jumps are tested where both pixels have depth, creases where both have normals, colour
+    everywhere (pixels without depth still have colour).
+    """
+    s = params.step_px
+    edge = np.zeros(mask.shape, dtype=bool)
+    for shift in ((0, s), (s, 0)):
+        a, b = _shifted(shift)
+        za, zb = depth_m[a], depth_m[b]
+        cut = (np.abs(za - zb) > depth_jump_limit(np.minimum(za, zb), s, params)) & (za > 0) & (zb > 0)
+        d = points_camera[a] - points_camera[b]
+        dn = normals_camera[a] - normals_camera[b]
+        convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
+        cut |= (convexity < -params.concave_threshold) & normal_valid[a] & normal_valid[b]
+        if chroma is not None:
+            cut |= np.abs(chroma[a] - chroma[b]).sum(axis=-1) > params.chroma_edge_threshold
+        cut &= mask[a] & mask[b]
+        edge[a] |= cut
+        edge[b] |= cut
+    return edge
+
+
+def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:
+    flat = labels.ravel()
+    count = np.maximum(np.bincount(flat, minlength=n + 1), 1)
+    return np.stack(
+        [np.bincount(flat, weights=values[..., k].ravel(), minlength=n + 1) / count for k in range(values.shape[-1])],
+        axis=1,
+    )
+
+
+def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams):
+    """Pixel contacts between different fragments within contact_radius_px of each other.
+
+    Returns (pairs (P, 2) int64 with a < b, counts (P, 3)): contacts at a continuous depth, across a
+    depth discontinuity, and where a pixel has no depth.
+    """
+    keys, kinds = [], []
+    r = params.contact_radius_px
+    shifts = [(0, k) for k in range(1, r + 1)] + [(k, 0) for k in range(1, r + 1)]
+    shifts += [(k, k) for k in range(1, r)] + [(k, -k) for k in range(1, r)]
+    big = np.int64(labels.max()) + 1
+    for shift in shifts:
+        a, b = _shifted(shift)
+        la, lb = labels[a], labels[b]
+        touching = (la != lb) & (la > 0) & (lb > 0)
+        za, zb = depth_m[a][touching], depth_m[b][touching]
+        unknown = (za <= 0) | (zb <= 0)
+        continuous = ~unknown & (np.abs(za - zb) <= depth_jump_limit(np.minimum(za, zb), np.hypot(*shift) + 1, params))
+        kinds.append(np.where(unknown, 2, np.where(continuous, 0, 1)))
+        lo = np.minimum(la[touching], lb[touching]).astype(np.int64)
+        hi = np.maximum(la[touching], lb[touching]).astype(np.int64)
+        keys.append(lo * big + hi)
+    keys = np.concatenate(keys)
+    kinds = np.concatenate(kinds)
+    unique, inverse = np.unique(keys, return_inverse=True)
+    counts = np.zeros((len(unique), 3), dtype=np.int64)
+    for kind in range(3):
+        counts[:, kind] = np.bincount(inverse[kinds == kind], minlength=len(unique))
+    return np.stack([unique // big, unique % big], axis=1), counts
+
+
+def flood(labels: np.ndarray, mask: np.ndarray, iterations: int) -> np.ndarray:
+    """Grow labels into the unlabelled pixels of mask, one 8-connected ring per iteration."""
+    out = labels.astype(np.uint16 if labels.max() < 65535 else np.float32)
+    todo = mask & (out == 0)
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(iterations):
+        grown = cv2.dilate(out, kernel)
+        new = todo & (grown > 0)
+        if not np.any(new):
+            break
+        out[new] = grown[new]
+        todo &= ~new
+    return out.astype(np.int64)
+
+
+def _union(n: int, pairs: np.ndarray) -> np.ndarray:
+    """Component ids for labels 0..n given undirected pairs: 0 stays 0, the rest become 1..K."""
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n + 1, n + 1))
+    component = connected_components(graph, directed=False)[1] + 1
+    component[0] = 0
+    return component
+
+
+def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
+    continuous, broken, unknown = counts[:, 0], counts[:, 1], counts[:, 2]
+    across_gap = (unknown >= params.min_contact_px) & (broken <= continuous)
+    return ((continuous >= params.min_contact_px) & (continuous >= broken)) | across_gap
+
+
+def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams) -> np.ndarray:
+    """Merge fragments into objects (see the module docstring). Returns labels (0 = none)."""
+    if n == 0:
+        return labels
+    pairs, counts = fragment_contacts(labels, depth_m, params)
+    if len(pairs) and params.use_colour:
+        means = _region_means(labels, n, chroma)
+        colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
+        merge = _should_merge(counts, params) & (colour_distance <= params.merge_chroma_threshold)
+        labels = _compact(_union(n, pairs[merge])[labels], 0)
+        pairs, counts = fragment_contacts(labels, depth_m, params)
+    n = int(labels.max())
+    area = np.bincount(labels.ravel(), weights=area_m2.ravel(), minlength=n + 1)
+    small = area < params.min_instance_area_m2
+    small[0] = False
+    if len(pairs) and np.any(small):
+        target = np.arange(n + 1)
+        contact = counts[:, 0] + counts[:, 2]
+        both = np.concatenate([pairs, pairs[:, ::-1]])
+        weight = np.concatenate([contact, contact])
+        candidate = small[both[:, 0]] & ~small[both[:, 1]] & (weight >= params.min_contact_px)
+        both, weight = both[candidate], weight[candidate]
+        order = np.lexsort((-weight, both[:, 0]))
+        both = both[order]
+        first = np.ones(len(both), dtype=bool)
+        first[1:] = both[1:, 0] != both[:-1, 0]
+        target[both[first, 0]] = both[first, 1]
+        labels = target[labels]
+        area = np.bincount(labels.ravel(), weights=area_m2.ravel(), minlength=n + 1)
+        small = area < params.min_instance_area_m2
+        small[0] = False
+    labels = np.where(small[labels], 0, labels)
+    return _compact(labels, 0)
+
+
+def grow_instances(labels, depth_m, chroma, candidates, table_chroma, params: ClusterParams) -> np.ndarray:
+    """Extend instances into `candidates` pixels near them whose colour matches the instance."""
+    n = int(labels.max())
+    if n == 0 or not np.any(candidates):
+        return labels
+    distance, (iy, ix) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    near = candidates & (labels == 0) & (distance <= params.grow_radius_px)
+    if not np.any(near):
+        return labels
+    means = _region_means(labels, n, chroma)
+    ys, xs = np.nonzero(near)
+    owner = labels[iy[ys, xs], ix[ys, xs]]
+    pixel_chroma = chroma[ys, xs]
+    to_instance = np.abs(pixel_chroma - means[owner]).sum(axis=1)
+    ok = to_instance <= params.grow_chroma_threshold
+    if table_chroma is not None:
+        ok &= to_instance < hue_distance(pixel_chroma, table_chroma[ys, xs])
+    z = depth_m[ys, xs]
+    z_owner = depth_m[iy[ys, xs], ix[ys, xs]]
+    ok &= (z <= 0) | (z_owner <= 0) | (np.abs(z - z_owner) <= depth_jump_limit(z_owner, params.grow_radius_px, params))
+    out = labels.copy()
+    out[ys[ok], xs[ok]] = owner[ok]
+    return out
+
+
+def cluster_instances(
+    points_camera: np.ndarray,
+    normals_camera: np.ndarray,
+    depth_m: np.ndarray,
+    chroma: np.ndarray,
+    object_mask: np.ndarray,
+    candidate_mask: np.ndarray,
+    normal_valid: np.ndarray,
+    area_m2: np.ndarray,
+    table_chroma: np.ndarray | None = None,
+    params: ClusterParams = ClusterParams(),
+) -> np.ndarray:
+    """Instance labels (uint16 HxW, 0 = not an object).
+
+    object_mask: pixels with geometric evidence of an object (above a support plane).
+    candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
+    but only count for an instance that has enough area of its own in object_mask.
+    """
+    mask = object_mask | candidate_mask
+    edge = separating_edges(
+        points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
+    )
+    fragments, n = ndimage.label(mask & ~edge)
+    if n == 0:
+        return np.zeros(mask.shape, dtype=np.uint16)
+    sizes = np.bincount(fragments.ravel(), minlength=n + 1)
+    keep = sizes >= params.min_fragment_px
+    keep[0] = False
+    fragments = _compact(np.where(keep[fragments], fragments, 0), 0)
+    fragments = flood(fragments, mask & (depth_m > 0), params.flood_iterations)
+    evidence = np.where(object_mask, area_m2, 0.0)
+    labels = merge_fragments(fragments, int(fragments.max()), depth_m, chroma, evidence, params)
+    grow_table = table_chroma if params.use_colour else None
+    labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)
+    return _relabel_by_size(labels, params.max_instances)
+
+
+def _compact(labels: np.ndarray, background: int) -> np.ndarray:
+    """Renumber labels to 1..K (background -> 0) keeping their order."""
+    used = np.unique(labels)
+    used = used[used != background]
+    remap = np.zeros(int(labels.max()) + 1 if labels.size else 1, dtype=np.int64)
+    remap[used] = np.arange(1, len(used) + 1)
+    return remap[labels]
+
+
+def _relabel_by_size(labels: np.ndarray, max_instances: int) -> np.ndarray:
+    """Consecutive ids 1..K, largest instance first; at most max_instances are kept."""
+    counts = np.bincount(labels.ravel())
+    counts[0] = 0
+    order = np.argsort(-counts, kind="stable")
+    order = order[counts[order] > 0][:max_instances]
+    remap = np.zeros(len(counts), dtype=np.uint16)
+    remap[order] = np.arange(1, len(order) + 1, dtype=np.uint16)
+    return remap[labels]

@@ -1,0 +1,96 @@
+"""Default unseen-object instance segmentation: support planes, then 3D instance clustering.
+
+`segment(rgb, depth_m, K, T_world_camera)` needs no learned weights and runs on the CPU.
+"""
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
+from arm_segmentation.geometry import (
+    backproject,
+    organized_normals,
+    preprocess_depth,
+    transform_points,
+    validate_frame,
+)
+from arm_segmentation.table_plane import (
+    SupportLevel,
+    TableParams,
+    classify_points,
+    estimate_support_levels,
+    pixel_area_m2,
+)
+
+
+@dataclass(frozen=True)
+class SegmentationParams:
+    """All parameters of the default method."""
+
+    fill_radius_px: int = 1
+    smooth_sigma_m: float = 0.01
+    table_colour_threshold: float = 0.1
+    candidate_radius_px: int = 8
+    table_colour_window_px: int = 31
+    table: TableParams = field(default_factory=TableParams)
+    cluster: ClusterParams = field(default_factory=ClusterParams)
+
+
+@dataclass
+class SegmentationResult:
+    labels: np.ndarray  # uint16 HxW, 0 = table / background, k > 0 = instance k
+    table_mask: np.ndarray  # bool HxW
+    levels: list[SupportLevel]
+
+
+def local_table_chroma(chroma: np.ndarray, table: np.ndarray, window_px: int) -> np.ndarray:
+    """HxWx3 mean chromaticity of the table pixels around each pixel (the global median where none).
+
+    Table colour varies with lighting (glare, saturation), so candidates are compared locally.
+    """
+    weight = table.astype(np.float32)
+    ksize = (window_px, window_px)
+    count = cv2.boxFilter(weight, -1, ksize, normalize=False)
+    total = cv2.boxFilter(chroma * weight[..., None], -1, ksize, normalize=False)
+    fallback = np.median(chroma[table][:: max(1, int(table.sum()) // 5000)], axis=0)
+    return np.where(count[..., None] > 0.5, total / np.maximum(count, 1.0)[..., None], fallback).astype(np.float32)
+
+
+def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None):
+    """Segment one frame; also returns the table mask and the support levels found.
+
+    Raises geometry.InputError for frames that cannot be interpreted (shapes, intrinsics, pose).
+    A frame without a visible table gives an all-zero label image.
+    """
+    params = params or SegmentationParams()
+    rgb, depth, K, T = validate_frame(rgb, depth_m, K, T_world_camera)
+    smoothed = preprocess_depth(depth, params.fill_radius_px, params.smooth_sigma_m)
+    points_camera = backproject(smoothed, K)
+    normals_camera = organized_normals(points_camera, params.cluster.step_px)
+    valid = normals_camera[..., 2] != 0
+    points_world = transform_points(points_camera, T)
+    normals_world = normals_camera @ T[:3, :3].T.astype(np.float32)
+    area = pixel_area_m2(points_camera, normals_camera, K)
+    area[~valid] = 0.0
+    levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
+    table, objects = classify_points(points_world, smoothed, levels, params.table)
+    chroma = chromaticity(rgb)
+    candidates = np.zeros_like(objects)
+    table_chroma = None
+    if np.any(table) and np.any(objects):
+        table_chroma = local_table_chroma(chroma, table, params.table_colour_window_px)
+        not_table_colour = hue_distance(chroma, table_chroma) > params.table_colour_threshold
+        near_objects = ndimage.distance_transform_edt(~objects) <= params.candidate_radius_px
+        candidates = near_objects & not_table_colour & (table | (smoothed <= 0))
+    labels = cluster_instances(
+        points_camera, normals_camera, smoothed, chroma, objects, candidates, valid, area, table_chroma, params.cluster
+    )
+    return SegmentationResult(labels=labels, table_mask=table, levels=levels)
+
+
+def segment(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None) -> np.ndarray:
+    """RGB-D frame -> instance labels (uint16 HxW): 0 = table / background, k > 0 = object k."""
+    return segment_detailed(rgb, depth_m, K, T_world_camera, params).labels

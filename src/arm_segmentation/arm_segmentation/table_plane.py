@@ -1,0 +1,156 @@
+"""Gravity-aligned support-plane estimation: the table (and any further horizontal table levels).
+
+The world frame is gravity-aligned (+z up), so every support plane is z = h. Levels are found as
+area-weighted peaks in the height histogram of upward-facing pixels; each level's footprint is the
+convex hull of its inlier pixels in the xy plane.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+
+@dataclass(frozen=True)
+class TableParams:
+    """Parameters of support-level estimation (metres, degrees)."""
+
+    horizontal_tolerance_deg: float = 12.0
+    histogram_bin_m: float = 0.004
+    min_table_area_m2: float = 0.08
+    max_levels: int = 3
+    band_m: float = 0.006
+    band_per_m2: float = 0.003
+    footprint_margin_m: float = 0.03
+    max_object_height_m: float = 0.6
+
+
+@dataclass(frozen=True)
+class SupportLevel:
+    """One horizontal support plane z = height_m with its footprint (convex hull in world xy)."""
+
+    height_m: float
+    area_m2: float
+    hull_equations: np.ndarray  # (F, 3): inside where eq[:, :2] @ xy + eq[:, 2] <= 0 (unit normals)
+    hull_xy: np.ndarray  # (M, 2) hull vertices, counter-clockwise
+
+    def contains_xy(self, xy: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """Boolean (...,) whether points (..., 2) lie inside the footprint grown by margin_m."""
+        eq = self.hull_equations.astype(np.float32)
+        inside = np.ones(xy.shape[:-1], dtype=bool)
+        for a, b, c in eq:
+            inside &= a * xy[..., 0] + b * xy[..., 1] + (c - margin_m) <= 0.0
+        return inside
+
+
+def pixel_area_m2(points_camera: np.ndarray, normals_camera: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Approximate surface area (m^2) that each pixel covers, from depth and viewing incidence."""
+    z = points_camera[..., 2]
+    dist = np.linalg.norm(points_camera, axis=-1)
+    cos_incidence = np.abs(np.einsum("hwc,hwc->hw", normals_camera, points_camera)) / np.maximum(dist, 1e-6)
+    return (z * z / (K[0, 0] * K[1, 1])) / np.maximum(cos_incidence, 0.25)
+
+
+def band_for_depth(depth_m: np.ndarray, params: TableParams) -> np.ndarray:
+    """Half-width of the table inlier band (m), growing with depth like structured-light noise."""
+    return params.band_m + params.band_per_m2 * depth_m * depth_m
+
+
+def estimate_support_levels(
+    points_world: np.ndarray,
+    normals_world: np.ndarray,
+    area_m2: np.ndarray,
+    valid: np.ndarray,
+    params: TableParams = TableParams(),
+) -> list[SupportLevel]:
+    """Find up to params.max_levels horizontal support planes, largest first.
+
+    points_world, normals_world: HxWx3 (world frame, +z up); area_m2, valid: HxW.
+    Returns an empty list when no upward-facing plane of at least min_table_area_m2 is seen.
+    """
+    cos_tol = np.cos(np.deg2rad(params.horizontal_tolerance_deg))
+    up = valid & (normals_world[..., 2] >= cos_tol)
+    if not np.any(up):
+        return []
+    z = points_world[..., 2][up].astype(np.float64)
+    w = area_m2[up].astype(np.float64)
+    xy = points_world[..., :2][up]
+    lo, hi = float(z.min()), float(z.max())
+    n_bins = max(int(np.ceil((hi - lo) / params.histogram_bin_m)) + 1, 1)
+    hist = np.bincount(((z - lo) / params.histogram_bin_m).astype(np.int64), weights=w, minlength=n_bins)
+    half = max(int(round(params.band_m / params.histogram_bin_m)), 1)
+    window = np.convolve(hist, np.ones(2 * half + 1), mode="same")
+    levels: list[SupportLevel] = []
+    taken = np.zeros(n_bins, dtype=bool)
+    for peak in np.argsort(window)[::-1]:
+        if len(levels) >= params.max_levels or window[peak] < params.min_table_area_m2:
+            break
+        if taken[peak]:
+            continue
+        first = max(peak - half, 0)
+        peak = first + int(np.argmax(hist[first : peak + half + 1]))
+        taken[max(peak - 3 * half, 0) : peak + 3 * half + 1] = True
+        centre = lo + (peak + 0.5) * params.histogram_bin_m
+        near = np.abs(z - centre) <= (half + 0.5) * params.histogram_bin_m
+        if not np.any(near):
+            continue
+        height = _weighted_median(z[near], w[near])
+        inliers = np.abs(z - height) <= params.band_m
+        area = float(w[inliers].sum())
+        if area < params.min_table_area_m2:
+            continue
+        hull = _hull(xy[inliers])
+        if hull is None:
+            continue
+        levels.append(SupportLevel(float(height), area, hull[0], hull[1]))
+    return levels
+
+
+def classify_points(
+    points_world: np.ndarray,
+    depth_m: np.ndarray,
+    levels: list[SupportLevel],
+    params: TableParams = TableParams(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split valid pixels into table and object candidates.
+
+    Returns (table_mask, object_mask), both HxW bool. A pixel belongs to the highest level whose
+    footprint contains it and that lies below it; it is table within the depth-dependent band of
+    that level and an object candidate up to max_object_height_m above it. Everything else
+    (outside every footprint, below the lowest level, too high) is background.
+    """
+    valid = depth_m > 0
+    table = np.zeros(depth_m.shape, dtype=bool)
+    objects = np.zeros(depth_m.shape, dtype=bool)
+    if not levels:
+        return table, objects
+    z = points_world[..., 2]
+    band = band_for_depth(depth_m, params)
+    support_height = np.full(depth_m.shape, np.nan, dtype=np.float32)
+    for level in sorted(levels, key=lambda lv: lv.height_m):
+        above = valid & (z >= level.height_m - band)
+        inside = above & level.contains_xy(points_world[..., :2], params.footprint_margin_m)
+        support_height[inside] = level.height_m
+    has_support = ~np.isnan(support_height)
+    height = np.where(has_support, z - support_height, np.inf)
+    table = has_support & (height <= band)
+    objects = has_support & (height > band) & (height <= params.max_object_height_m)
+    return table, objects
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+
+
+def _hull(xy: np.ndarray, max_points: int = 4000):
+    if len(xy) < 3:
+        return None
+    if len(xy) > max_points:
+        xy = xy[np.linspace(0, len(xy) - 1, max_points).astype(np.int64)]
+    try:
+        hull = ConvexHull(xy.astype(np.float64))
+    except QhullError:
+        return None
+    return hull.equations.copy(), xy[hull.vertices].astype(np.float64)
