@@ -1,0 +1,265 @@
+"""ARM inference path (paper Section 3.1): RGB-D frame + instance labels -> simulation-ready objects.
+
+Stages (timed in Reconstructor.last_timings_s): four-channel grids of all objects (shared
+back-projection), one batched network pass, method post-processing (ray carving / extrusion),
+thresholding + marching cubes, inter-object intersection removal, convex decomposition and a
+visible-fraction estimate. Usable without ROS.
+"""
+
+import pathlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+import trimesh
+
+from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
+from .convex_parts import ConvexDecomposer, DecompositionSettings
+from .grid import DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
+from .meshing import (
+    DEFAULT_MIN_COMPONENT_VOXELS,
+    DEFAULT_THRESHOLD,
+    empty_mesh,
+    extrude_to_table,
+    occupancy_mesh,
+    ray_carve,
+    remove_intersections,
+)
+from .network import METHODS, canonical_method, predict_occupancy, resolve_device
+
+STAGES = ("grid", "network", "postprocess", "meshing", "intersections", "decomposition", "visibility")
+
+
+@dataclass
+class ReconstructedObject:
+    """One reconstructed object. mesh and convex_parts are in the object frame, which is parallel to
+    the world frame with its origin at the mesh's centroid (T_world_object). error is '' on success;
+    otherwise the mesh is empty and error says why."""
+
+    id: int
+    T_world_object: np.ndarray
+    mesh: trimesh.Trimesh
+    convex_parts: list[trimesh.Trimesh]
+    visible_fraction: float
+    grid: GridFrame | None
+    method: str
+    error: str = ""
+    probabilities: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return not self.error and len(self.mesh.faces) > 0
+
+    def world_mesh(self) -> trimesh.Trimesh:
+        return self.mesh.copy().apply_transform(self.T_world_object)
+
+    def world_convex_parts(self) -> list[trimesh.Trimesh]:
+        return [p.copy().apply_transform(self.T_world_object) for p in self.convex_parts]
+
+
+@dataclass(frozen=True)
+class ReconstructionSettings:
+    """method: one of network.METHODS; checkpoint_path '' = the shipped checkpoint of the method's
+    network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
+    over object diameter; threshold: occupancy probability of a solid voxel; table_height_m None =
+    estimated per object."""
+
+    method: str = "arm"
+    checkpoint_path: str = ""
+    device: str = "cpu"
+    resolution: int = 0
+    k: float = DEFAULT_K
+    threshold: float = DEFAULT_THRESHOLD
+    min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
+    remove_intersections: bool = True
+    decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
+    estimate_visibility: bool = True
+    table_height_m: float | None = None
+    batch_size: int = 16
+    keep_probabilities: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "method", canonical_method(self.method))
+        if not 0.0 < float(self.threshold) < 1.0:
+            raise ValueError(f"threshold must be in (0, 1), got {self.threshold}")
+        if int(self.resolution) < 0 or int(self.resolution) % 8:
+            raise ValueError(f"resolution must be 0 (from the checkpoint) or a multiple of 8, got {self.resolution}")
+        if not np.isfinite(self.k) or self.k <= 1:
+            raise ValueError(f"k must be > 1, got {self.k}")
+        if int(self.batch_size) < 1:
+            raise ValueError(f"batch_size must be >= 1, got {self.batch_size}")
+
+    @property
+    def variant(self) -> str:
+        return METHODS[self.method][0]
+
+    @property
+    def postprocess(self) -> str | None:
+        return METHODS[self.method][1]
+
+
+def resolve_checkpoint_path(settings: ReconstructionSettings) -> pathlib.Path:
+    return (
+        pathlib.Path(settings.checkpoint_path)
+        if settings.checkpoint_path
+        else default_checkpoint_path(settings.variant)
+    )
+
+
+def _empty_object(object_id: int, method: str, reason: str, frame: GridFrame | None = None) -> ReconstructedObject:
+    return ReconstructedObject(int(object_id), np.eye(4), empty_mesh(), [], -1.0, frame, method, reason)
+
+
+def _object_pose(mesh: trimesh.Trimesh) -> np.ndarray:
+    centre = mesh.center_mass if mesh.is_watertight and mesh.volume > 0 else mesh.vertices.mean(0)
+    T = np.eye(4)
+    T[:3, 3] = centre
+    return T
+
+
+def estimate_visible_fraction(mesh_world, labels, object_id, K, T_world_camera) -> float:
+    """Visible pixels of the object over the pixels its reconstructed mesh covers alone (clipped to 1;
+    -1 when the mesh projects to no pixel)."""
+    from arm_sim.camera import silhouette
+
+    height, width = labels.shape
+    alone = silhouette(mesh_world.vertices, mesh_world.faces, K, T_world_camera, width, height).sum()
+    if alone == 0:
+        return -1.0
+    return float(min(1.0, np.count_nonzero(labels == object_id) / alone))
+
+
+class Reconstructor:
+    """Holds the network and the caches; call it once per frame."""
+
+    def __init__(self, settings: ReconstructionSettings | None = None, model: torch.nn.Module | None = None):
+        self.settings = settings or ReconstructionSettings()
+        self.device = resolve_device(self.settings.device)
+        if model is None:
+            path = resolve_checkpoint_path(self.settings)
+            if not path.is_file():
+                raise CheckpointError(
+                    f"no checkpoint for method '{self.settings.method}' at {path}: train one with the "
+                    f"'train' entry point or pass checkpoint_path"
+                )
+            model, config = load_checkpoint(
+                path,
+                self.device,
+                expected_variant=self.settings.variant,
+                expected_resolution=self.settings.resolution or None,
+            )
+            self.checkpoint_config = config
+        else:
+            if getattr(model, "variant", self.settings.variant) != self.settings.variant:
+                raise CheckpointError(f"model variant {model.variant!r} does not fit method {self.settings.method!r}")
+            self.checkpoint_config = {"variant": self.settings.variant, "resolution": getattr(model, "resolution", 0)}
+            model = model.to(self.device).eval()
+        self.model = model
+        self.resolution = int(self.settings.resolution or getattr(model, "resolution", 32))
+        if getattr(model, "resolution", self.resolution) != self.resolution:
+            raise CheckpointError(f"model resolution {model.resolution} differs from requested {self.resolution}")
+        self.decomposer = ConvexDecomposer(self.settings.decomposition)
+        self.last_timings_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+
+    def __call__(self, rgb, depth_m, K, T_world_camera, labels, object_ids=None) -> list[ReconstructedObject]:
+        """Objects of one frame, ascending id. Raises GridInputError for a malformed frame (shapes,
+        non-finite pose or intrinsics); objects that cannot be reconstructed come back empty with
+        their error set."""
+        if rgb is not None and np.asarray(rgb).shape[:2] != np.asarray(depth_m).shape[:2]:
+            raise GridInputError(f"rgb shape {np.asarray(rgb).shape} does not match depth {np.asarray(depth_m).shape}")
+        self.last_timings_s = dict.fromkeys(STAGES, 0.0)
+        grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
+        probabilities = self.predict(grids)
+        return self.build_objects(grids, probabilities, labels, K, T_world_camera)
+
+    def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
+        start = time.perf_counter()
+        s = self.settings
+        grids = frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, s.k, s.table_height_m)
+        self.last_timings_s["grid"] = time.perf_counter() - start
+        return grids
+
+    def predict(self, grids: FrameGrids) -> np.ndarray:
+        """Occupancy probabilities [N, d, d, d] of the frame's grids, after the method's post-processing
+        (ray carving: observed-empty voxels cleared; extrusion: columns filled down to the table)."""
+        start = time.perf_counter()
+        probabilities = predict_occupancy(self.model, grids.grids, self.device, self.settings.batch_size)
+        self.last_timings_s["network"] = time.perf_counter() - start
+        start = time.perf_counter()
+        if self.settings.postprocess == "ray_carving":
+            probabilities = np.stack([ray_carve(p, g) for p, g in zip(probabilities, grids.grids, strict=True)])
+        elif self.settings.postprocess == "extrude":
+            probabilities = extrude_to_table(probabilities.transpose(1, 2, 3, 0)).transpose(3, 0, 1, 2)
+        self.last_timings_s["postprocess"] = time.perf_counter() - start
+        return probabilities
+
+    def build_objects(
+        self, grids: FrameGrids, probabilities: np.ndarray, labels, K, T_world_camera
+    ) -> list[ReconstructedObject]:
+        """Meshes, intersection removal, convex parts and visibility for per-object occupancy
+        probabilities [N, d, d, d] laid out in grids.frames (the stages after the network)."""
+        s = self.settings
+        labels = np.asarray(labels)
+        start = time.perf_counter()
+        meshes = [
+            occupancy_mesh(p, frame, s.threshold, s.min_component_voxels)
+            for p, frame in zip(probabilities, grids.frames, strict=True)
+        ]
+        self.last_timings_s["meshing"] = time.perf_counter() - start
+
+        start = time.perf_counter()
+        if s.remove_intersections and len(meshes) > 1:
+            meshes, _ = remove_intersections(meshes)
+        self.last_timings_s["intersections"] = time.perf_counter() - start
+
+        objects = {i: _empty_object(i, s.method, reason) for i, reason in grids.errors.items()}
+        decomposition_s = visibility_s = 0.0
+        K = np.asarray(K, dtype=np.float64)
+        T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
+        for n, (object_id, frame, mesh) in enumerate(zip(grids.object_ids, grids.frames, meshes, strict=True)):
+            if len(mesh.faces) == 0:
+                objects[object_id] = _empty_object(
+                    object_id, s.method, f"no voxel above threshold {s.threshold} for object {object_id}", frame
+                )
+                continue
+            T_world_object = _object_pose(mesh)
+            local = mesh.copy().apply_translation(-T_world_object[:3, 3])
+            start = time.perf_counter()
+            parts = self.decomposer(local)
+            decomposition_s += time.perf_counter() - start
+            start = time.perf_counter()
+            visible = (
+                estimate_visible_fraction(mesh, labels, object_id, K, T_world_camera) if s.estimate_visibility else -1.0
+            )
+            visibility_s += time.perf_counter() - start
+            objects[object_id] = ReconstructedObject(
+                object_id,
+                T_world_object,
+                local,
+                parts,
+                visible,
+                frame,
+                s.method,
+                "",
+                probabilities[n] if s.keep_probabilities else None,
+            )
+        self.last_timings_s["decomposition"] = decomposition_s
+        self.last_timings_s["visibility"] = visibility_s
+        return [objects[i] for i in sorted(objects)]
+
+
+_RECONSTRUCTORS: dict[ReconstructionSettings, Reconstructor] = {}
+
+
+def reconstruct(rgb, depth_m, K, T_world_camera, labels, method: str = "arm", **settings) -> list[ReconstructedObject]:
+    """One-call API: reconstruct(rgb, depth_m, K, T_world_camera, labels, method='arm', checkpoint_path='',
+    device='cpu', threshold=0.5, ...) -> list[ReconstructedObject]. Keyword settings are those of
+    ReconstructionSettings (decomposition takes a DecompositionSettings). The network is loaded once
+    per distinct settings and reused."""
+    key = ReconstructionSettings(method=method, **settings)
+    reconstructor = _RECONSTRUCTORS.get(key)
+    if reconstructor is None:
+        reconstructor = Reconstructor(key)
+        _RECONSTRUCTORS[key] = reconstructor
+    return reconstructor(rgb, depth_m, K, T_world_camera, labels)
