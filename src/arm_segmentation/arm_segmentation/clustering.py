@@ -29,23 +29,24 @@ class ClusterParams:
     concave_threshold: float = 0.35
     use_colour: bool = True
     chroma_edge_threshold: float = 0.15
-    merge_chroma_threshold: float = 0.12
+    merge_chroma_threshold: float = 0.16
     contact_radius_px: int = 2
     min_contact_px: int = 3
-    min_fragment_px: int = 6
+    min_fragment_px: int = 3
     min_instance_area_m2: float = 3e-4
-    flood_iterations: int = 40
-    grow_radius_px: int = 5
+    flood_iterations: int = 20
+    flood_chroma_threshold: float = 0.6
+    grow_radius_px: int = 3
     grow_chroma_threshold: float = 0.12
     max_instances: int = 255
 
 
-def chromaticity(rgb: np.ndarray) -> np.ndarray:
-    """Opponent chromaticity (rgb - mean(rgb)) / (|rgb| + 5) of a lightly blurred image, HxWx3 float32.
+def chromaticity(rgb: np.ndarray, blur: int = 3) -> np.ndarray:
+    """Opponent chromaticity (rgb - mean(rgb)) / (|rgb| + 5) after a blur x blur box filter, HxWx3 float32.
 
     Invariant to diffuse shading; a specular highlight shortens it without turning it.
     """
-    rgb_f = cv2.blur(rgb, (3, 3)).astype(np.float32)
+    rgb_f = (cv2.blur(rgb, (blur, blur)) if blur > 1 else rgb).astype(np.float32)
     norm = np.sqrt(np.einsum("hwc,hwc->hw", rgb_f, rgb_f))[..., None] + 5.0
     return (rgb_f - rgb_f.mean(axis=-1, keepdims=True)) / norm
 
@@ -143,18 +144,28 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
     return np.stack([unique // big, unique % big], axis=1), counts
 
 
-def flood(labels: np.ndarray, mask: np.ndarray, iterations: int) -> np.ndarray:
-    """Grow labels into the unlabelled pixels of mask, one 8-connected ring per iteration."""
-    out = labels.astype(np.uint16 if labels.max() < 65535 else np.float32)
+def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: int, max_chroma: float) -> np.ndarray:
+    """Grow labels into the unlabelled pixels of mask, one 8-connected ring per iteration.
+
+    A pixel joins a neighbouring label only if its chromaticity is within max_chroma (L1) of
+    that label's mean, so a region without a seed of its own is not swallowed by a neighbour.
+    """
+    n = int(labels.max())
+    out = labels.astype(np.uint16 if n < 65535 else np.float32)
+    means = _region_means(labels, n, chroma)
     todo = mask & (out == 0)
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(iterations):
         grown = cv2.dilate(out, kernel)
-        new = todo & (grown > 0)
-        if not np.any(new):
+        gy, gx = np.nonzero(todo & (grown > 0))
+        if len(gy) == 0:
             break
-        out[new] = grown[new]
-        todo &= ~new
+        owner = grown[gy, gx].astype(np.int64)
+        ok = np.abs(chroma[gy, gx] - means[owner]).sum(axis=1) <= max_chroma
+        if not np.any(ok):
+            break
+        out[gy[ok], gx[ok]] = owner[ok]
+        todo[gy[ok], gx[ok]] = False
     return out.astype(np.int64)
 
 
@@ -261,7 +272,15 @@ def cluster_instances(
     keep = sizes >= params.min_fragment_px
     keep[0] = False
     fragments = _compact(np.where(keep[fragments], fragments, 0), 0)
-    fragments = flood(fragments, mask & (depth_m > 0), params.flood_iterations)
+    fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_chroma_threshold)
+    leftover, n_left = ndimage.label(mask & (fragments == 0))
+    if n_left:
+        sizes = np.bincount(leftover.ravel(), minlength=n_left + 1)
+        keep = sizes >= params.min_fragment_px
+        keep[0] = False
+        offset = int(fragments.max())
+        fragments = np.where(keep[leftover], leftover + offset, fragments)
+        fragments = _compact(fragments, 0)
     evidence = np.where(object_mask, area_m2, 0.0)
     labels = merge_fragments(fragments, int(fragments.max()), depth_m, chroma, evidence, params)
     grow_table = table_chroma if params.use_colour else None

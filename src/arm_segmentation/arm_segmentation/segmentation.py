@@ -17,26 +17,32 @@ from arm_segmentation.geometry import (
     transform_points,
     validate_frame,
 )
+from arm_segmentation.refine import RefineParams, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
     SupportLevel,
     TableParams,
-    classify_points,
+    classify_heights,
     estimate_support_levels,
     pixel_area_m2,
+    support_heights,
 )
 
 
 @dataclass(frozen=True)
 class SegmentationParams:
-    """All parameters of the default method."""
+    """All parameters of the default method. Pixel sizes refer to the working resolution: the
+    input subsampled by working_stride (2: a 640x480 frame is processed at 320x240)."""
+
+    working_stride: int = 2
 
     fill_radius_px: int = 1
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
-    candidate_radius_px: int = 8
-    table_colour_window_px: int = 31
+    candidate_radius_px: int = 4
+    table_colour_window_px: int = 15
     table: TableParams = field(default_factory=TableParams)
     cluster: ClusterParams = field(default_factory=ClusterParams)
+    refine: RefineParams = field(default_factory=RefineParams)
 
 
 @dataclass
@@ -66,7 +72,13 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     A frame without a visible table gives an all-zero label image.
     """
     params = params or SegmentationParams()
-    rgb, depth, K, T = validate_frame(rgb, depth_m, K, T_world_camera)
+    rgb_full, depth_full, K_full, T = validate_frame(rgb, depth_m, K, T_world_camera)
+    stride = params.working_stride
+    rgb, depth, K = rgb_full, depth_full, K_full
+    if stride > 1:
+        rgb, depth = rgb_full[::stride, ::stride], depth_full[::stride, ::stride]
+        K = K_full.copy()
+        K[:2] /= stride
     smoothed = preprocess_depth(depth, params.fill_radius_px, params.smooth_sigma_m)
     points_camera = backproject(smoothed, K)
     normals_camera = organized_normals(points_camera, params.cluster.step_px)
@@ -76,7 +88,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     area = pixel_area_m2(points_camera, normals_camera, K)
     area[~valid] = 0.0
     levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
-    table, objects = classify_points(points_world, smoothed, levels, params.table)
+    support = support_heights(points_world, smoothed, levels, params.table)
+    table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
     chroma = chromaticity(rgb)
     candidates = np.zeros_like(objects)
     table_chroma = None
@@ -88,6 +101,11 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     labels = cluster_instances(
         points_camera, normals_camera, smoothed, chroma, objects, candidates, valid, area, table_chroma, params.cluster
     )
+    if stride > 1:
+        labels = refine_full_resolution(
+            labels, chroma, support, table_chroma, stride, rgb_full, depth_full, K_full, T, params.table, params.refine
+        )
+        table = upsample(table, stride, depth_full.shape)
     return SegmentationResult(labels=labels, table_mask=table, levels=levels)
 
 

@@ -8,6 +8,7 @@ convex hull of its inlier pixels in the xy plane.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
 
@@ -106,36 +107,56 @@ def estimate_support_levels(
     return levels
 
 
+def support_heights(
+    points_world: np.ndarray,
+    depth_m: np.ndarray,
+    levels: list[SupportLevel],
+    params: TableParams = TableParams(),
+) -> np.ndarray:
+    """HxW float32 height (m) of the support level under each pixel; NaN where there is none.
+
+    A pixel belongs to the highest level whose footprint contains it and that lies below it.
+    Pixels without depth take the support of the nearest pixel with depth.
+    """
+    valid = depth_m > 0
+    support = np.full(depth_m.shape, np.nan, dtype=np.float32)
+    if not levels:
+        return support
+    z = points_world[..., 2]
+    band = band_for_depth(depth_m, params)
+    for level in sorted(levels, key=lambda lv: lv.height_m):
+        above = valid & (z >= level.height_m - band)
+        ys, xs = np.nonzero(above)
+        inside = level.contains_xy(points_world[ys, xs, :2], params.footprint_margin_m)
+        support[ys[inside], xs[inside]] = level.height_m
+    if np.any(valid) and not np.all(valid):
+        _, (iy, ix) = ndimage.distance_transform_edt(~valid, return_indices=True)
+        support = np.where(valid, support, support[iy, ix])
+    return support
+
+
+def classify_heights(
+    z_world: np.ndarray, depth_m: np.ndarray, support: np.ndarray, params: TableParams = TableParams()
+) -> tuple[np.ndarray, np.ndarray]:
+    """(table_mask, object_mask) of the pixels with depth: table within the depth-dependent band
+    of their support level, object up to max_object_height_m above it, else background."""
+    has_support = (depth_m > 0) & ~np.isnan(support)
+    height = np.where(has_support, z_world - np.nan_to_num(support), np.inf)
+    band = band_for_depth(depth_m, params)
+    table = has_support & (height <= band)
+    objects = has_support & (height > band) & (height <= params.max_object_height_m)
+    return table, objects
+
+
 def classify_points(
     points_world: np.ndarray,
     depth_m: np.ndarray,
     levels: list[SupportLevel],
     params: TableParams = TableParams(),
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Split valid pixels into table and object candidates.
-
-    Returns (table_mask, object_mask), both HxW bool. A pixel belongs to the highest level whose
-    footprint contains it and that lies below it; it is table within the depth-dependent band of
-    that level and an object candidate up to max_object_height_m above it. Everything else
-    (outside every footprint, below the lowest level, too high) is background.
-    """
-    valid = depth_m > 0
-    table = np.zeros(depth_m.shape, dtype=bool)
-    objects = np.zeros(depth_m.shape, dtype=bool)
-    if not levels:
-        return table, objects
-    z = points_world[..., 2]
-    band = band_for_depth(depth_m, params)
-    support_height = np.full(depth_m.shape, np.nan, dtype=np.float32)
-    for level in sorted(levels, key=lambda lv: lv.height_m):
-        above = valid & (z >= level.height_m - band)
-        inside = above & level.contains_xy(points_world[..., :2], params.footprint_margin_m)
-        support_height[inside] = level.height_m
-    has_support = ~np.isnan(support_height)
-    height = np.where(has_support, z - support_height, np.inf)
-    table = has_support & (height <= band)
-    objects = has_support & (height > band) & (height <= params.max_object_height_m)
-    return table, objects
+    """Split valid pixels into (table_mask, object_mask), both HxW bool (see classify_heights)."""
+    support = support_heights(points_world, depth_m, levels, params)
+    return classify_heights(points_world[..., 2], depth_m, support, params)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:

@@ -1,0 +1,123 @@
+"""Full-resolution refinement of instance labels computed on a subsampled working grid.
+
+The upsampled labels are cut back to the full-resolution object evidence (pixels above their
+support plane, or pixels without depth / in the table band whose colour is not the table's), then
+flooded ring by ring into the remaining evidence pixels whose colour matches the instance: this
+recovers thin parts (stems, poles, handles) and sharp boundaries lost by subsampling.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from arm_segmentation.clustering import chromaticity, hue_distance
+from arm_segmentation.table_plane import TableParams, band_for_depth
+
+
+@dataclass(frozen=True)
+class RefineParams:
+    """Parameters of the full-resolution refinement (pixels at full resolution)."""
+
+    iterations: int = 12
+    chroma_threshold: float = 0.12
+    table_colour_threshold: float = 0.1
+    search_radius_px: int = 14
+    colour_blur_px: int = 1
+
+
+def upsample(image: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """Nearest-neighbour upsampling of an image subsampled with [::stride, ::stride]."""
+    return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)[: shape[0], : shape[1]]
+
+
+def world_height(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
+    """HxW float32 world z of every pixel (meaningless where depth is 0)."""
+    h, w = depth_m.shape
+    r = T_world_camera[2, :3]
+    u = ((np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])) * np.float32(r[0])
+    v = ((np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1])) * np.float32(r[1])
+    return depth_m * (u[None, :] + v[:, None] + np.float32(r[2])) + np.float32(T_world_camera[2, 3])
+
+
+def instance_colours(labels: np.ndarray, chroma: np.ndarray) -> np.ndarray:
+    """(K + 1, 3) mean chromaticity of each instance (row 0 unused)."""
+    n = int(labels.max())
+    flat = labels.ravel()
+    count = np.maximum(np.bincount(flat, minlength=n + 1), 1)
+    return np.stack(
+        [np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) / count for k in range(3)], axis=1
+    )
+
+
+def refine_full_resolution(
+    labels_work: np.ndarray,
+    chroma_work: np.ndarray,
+    support_work: np.ndarray,
+    table_chroma_work: np.ndarray | None,
+    stride: int,
+    rgb: np.ndarray,
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    T_world_camera: np.ndarray,
+    table_params: TableParams,
+    params: RefineParams = RefineParams(),
+) -> np.ndarray:
+    """Full-resolution uint16 labels from working-grid labels (see the module docstring)."""
+    shape = depth_m.shape
+    labels = upsample(labels_work, stride, shape)
+    n = int(labels_work.max())
+    if n == 0:
+        return labels
+    near = cv2.dilate((labels > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=params.search_radius_px)
+    ys, xs = np.nonzero(near)
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    crop = (slice(y0, y1), slice(x0, x1))
+    K_crop = K.copy()
+    K_crop[0, 2] -= x0
+    K_crop[1, 2] -= y0
+    depth = depth_m[crop]
+    labels_crop = labels[crop]
+    support = upsample(support_work, stride, shape)[crop]
+    height = world_height(depth, K_crop, T_world_camera) - support
+    has_depth = depth > 0
+    band = band_for_depth(depth, table_params)
+    with np.errstate(invalid="ignore"):
+        above = has_depth & (height > band) & (height <= table_params.max_object_height_m)
+        table = has_depth & (np.abs(height) <= band)
+    chroma = chromaticity(rgb[crop], blur=params.colour_blur_px)
+    colour_only = (table | ~has_depth) & (near[crop] > 0)
+    if table_chroma_work is not None:
+        table_chroma = upsample(table_chroma_work, stride, shape)[crop]
+        cy, cx = np.nonzero(colour_only)
+        off_table = hue_distance(chroma[cy, cx], table_chroma[cy, cx]) > params.table_colour_threshold
+        colour_only[cy[~off_table], cx[~off_table]] = False
+    else:
+        table_chroma = None
+    evidence = above | colour_only
+    out = np.where(evidence, labels_crop, 0).astype(np.uint16)
+    means = instance_colours(labels_work, chroma_work)
+    todo = evidence & (out == 0)
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(params.iterations):
+        grown = cv2.dilate(out, kernel)
+        gy, gx = np.nonzero(todo & (grown > 0))
+        if len(gy) == 0:
+            break
+        owner = grown[gy, gx]
+        pixel = chroma[gy, gx]
+        to_instance = np.abs(pixel - means[owner]).sum(axis=1)
+        if table_chroma is not None:
+            to_table = hue_distance(pixel, table_chroma[gy, gx])
+            ok = (to_instance <= params.chroma_threshold) & (~table[gy, gx] | (to_instance < to_table))
+            ok |= above[gy, gx] & (to_instance < to_table) & (to_instance <= 2 * params.chroma_threshold)
+            ok |= colour_only[gy, gx] & (to_instance < 0.5 * to_table)
+        else:
+            ok = to_instance <= params.chroma_threshold
+        if not np.any(ok):
+            break
+        out[gy[ok], gx[ok]] = owner[ok]
+        todo[gy[ok], gx[ok]] = False
+    full = np.zeros(shape, dtype=np.uint16)
+    full[crop] = out
+    return full
