@@ -1,0 +1,182 @@
+"""reconstruction_node: /arm/segmented_frame -> /arm/meshes (reliable, transient-local) + RViz markers.
+
+Frames are reconstructed by one worker thread that always takes the newest frame; a frame that
+arrives while another waits replaces it (counted as dropped). Malformed frames are logged
+(rate-limited) and nothing is published for them.
+"""
+
+import threading
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from visualization_msgs.msg import MarkerArray
+
+from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_sim.conversions import ConversionError
+from arm_sim.ros_common import (
+    RateLimitedErrors,
+    declare,
+    diagnostics_msg,
+    latched_qos,
+    reject_invalid_choices,
+    sensor_qos,
+    spin_node,
+)
+
+from .checkpoint import CheckpointError
+from .convex_parts import DecompositionSettings
+from .grid import GridInputError
+from .messages import frame_from_msg, main_table_height, markers_msg, objects_to_msg
+from .network import METHODS
+from .pipeline import STAGES, ReconstructionSettings, Reconstructor
+
+
+class ReconstructionNode(Node):
+    def __init__(self, **node_options):
+        super().__init__("reconstruction_node", **node_options)
+        method = declare(self, "method", "arm", "Reconstruction method", choices=sorted(METHODS))
+        checkpoint = declare(self, "checkpoint_path", "", "Checkpoint file; '' = shipped checkpoint of the method")
+        device = declare(self, "device", "cpu", "Torch device", choices=["cpu", "cuda", "auto"])
+        resolution = declare(self, "resolution", 0, "Voxels per grid side; 0 = the checkpoint's", 0, 256)
+        k = declare(self, "k", 4.0, "Grid side over the object's observed diameter", 1.5, 16.0)
+        threshold = declare(self, "threshold", 0.5, "Occupancy probability of a solid voxel", 0.01, 0.99)
+        min_component = declare(self, "min_component_voxels", 4, "Drop occupied components smaller than this", 1, 4096)
+        cut = declare(self, "remove_intersections", True, "Cut overlaps from the larger of two meshes")
+        fixed_table = declare(self, "use_fixed_table_height", False, "Use table_height_m instead of estimating it")
+        table_height = declare(self, "table_height_m", 0.0, "Table plane height when fixed, metres", -10.0, 10.0)
+        decomposition = DecompositionSettings(
+            max_parts=declare(self, "decomposition.max_parts", 8, "Convex parts per object at most", 1, 64),
+            max_vertices=declare(self, "decomposition.max_vertices", 64, "Hull vertices per part at most", 4, 256),
+            concavity_tolerance=declare(
+                self, "decomposition.concavity_tolerance", 0.05, "Summed concavity / mesh volume", 0.0, 1.0
+            ),
+            method=declare(
+                self, "decomposition.method", "planes", "Convex decomposition", choices=["planes", "coacd", "hull"]
+            ),
+        )
+        visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
+        reliability = declare(
+            self,
+            "frame_reliability",
+            "reliable",
+            "QoS reliability of the frame subscription",
+            choices=["reliable", "best_effort"],
+        )
+        self.marker_alpha = declare(self, "marker_alpha", 0.8, "Marker opacity", 0.0, 1.0)
+        reject_invalid_choices(self, {"method": sorted(METHODS), "device": ["cpu", "cuda", "auto"]})
+
+        settings = ReconstructionSettings(
+            method=method,
+            checkpoint_path=checkpoint,
+            device=device,
+            resolution=resolution,
+            k=k,
+            threshold=threshold,
+            min_component_voxels=min_component,
+            remove_intersections=cut,
+            decomposition=decomposition,
+            estimate_visibility=visibility,
+            table_height_m=table_height if fixed_table else None,
+        )
+        try:
+            self.reconstructor = Reconstructor(settings)
+        except CheckpointError as error:
+            raise ValueError(f"checkpoint: {error}") from None
+
+        self.errors = RateLimitedErrors(self.get_logger())
+        self.pub_objects = self.create_publisher(ReconstructedObjectArray, "arm/meshes", latched_qos())
+        self.pub_markers = self.create_publisher(MarkerArray, "arm/meshes/markers", latched_qos())
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.create_subscription(SegmentedFrame, "arm/segmented_frame", self.on_frame, sensor_qos(reliability, 1))
+
+        self.received = self.processed = self.dropped = self.rejected = 0
+        self._latest: SegmentedFrame | None = None
+        self._wake = threading.Condition()
+        self._stop = False
+        self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f"reconstruction ready: method {settings.method}, resolution {self.reconstructor.resolution}, "
+            f"device {self.reconstructor.device}"
+        )
+
+    def on_frame(self, msg: SegmentedFrame) -> None:
+        with self._wake:
+            self.received += 1
+            if self._latest is not None:
+                self.dropped += 1
+            self._latest = msg
+            self._wake.notify()
+
+    def _work(self) -> None:
+        while True:
+            with self._wake:
+                while self._latest is None and not self._stop:
+                    self._wake.wait()
+                if self._stop:
+                    return
+                msg, self._latest = self._latest, None
+            self.process(msg)
+
+    def process(self, msg: SegmentedFrame) -> None:
+        started = time.perf_counter()
+        try:
+            frame = frame_from_msg(msg)
+            objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
+        except (ConversionError, GridInputError) as error:
+            self.rejected += 1
+            self.errors.error(type(error).__name__, f"dropping malformed segmented frame: {error}")
+            return
+        except Exception as error:  # a failure inside one frame must not kill the node
+            self.rejected += 1
+            self.errors.error("reconstruction", f"reconstruction failed: {type(error).__name__}: {error}")
+            return
+        header = msg.header
+        header.frame_id = frame.world_frame_id or "world"
+        default_table = self.reconstructor.settings.table_height_m or 0.0
+        self.pub_objects.publish(objects_to_msg(objects, header, main_table_height(objects, default_table)))
+        self.pub_markers.publish(markers_msg(objects, header, self.marker_alpha))
+        self.processed += 1
+        failed = [o for o in objects if not o.ok]
+        for obj in failed:
+            self.errors.error(f"object {obj.id}", f"object {obj.id} not reconstructed: {obj.error}")
+        values = {f"{stage}_ms": 1000.0 * self.reconstructor.last_timings_s[stage] for stage in STAGES}
+        values.update(
+            frame_to_meshes_ms=1000.0 * (time.perf_counter() - started),
+            objects=len(objects) - len(failed),
+            failed_objects=len(failed),
+            frames_received=self.received,
+            frames_processed=self.processed,
+            frames_dropped=self.dropped,
+            frames_rejected=self.rejected,
+        )
+        level = DiagnosticStatus.WARN if failed else DiagnosticStatus.OK
+        message = f"{len(failed)} object(s) not reconstructed" if failed else "ok"
+        self.pub_diag.publish(diagnostics_msg(self, "reconstruction", values, level, message))
+
+    def close(self) -> None:
+        with self._wake:
+            self._stop = True
+            self._wake.notify()
+        self._worker.join(timeout=10.0)
+
+
+def _make_node() -> ReconstructionNode:
+    try:
+        return ReconstructionNode()
+    except RCLError:
+        if not rclpy.ok():  # SIGINT/SIGTERM arrived while the node was starting
+            raise ExternalShutdownException() from None
+        raise
+
+
+def main(args=None) -> int:
+    return spin_node(_make_node, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

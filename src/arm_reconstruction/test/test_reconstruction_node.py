@@ -1,0 +1,170 @@
+import os
+import time
+
+import numpy as np
+import pytest
+import rclpy
+import torch
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_reconstruction.checkpoint import save_checkpoint
+from arm_reconstruction.grid import voxelize_mesh
+from arm_reconstruction.messages import (
+    frame_from_msg,
+    frame_to_msg,
+    markers_msg,
+    object_from_msg,
+    object_to_msg,
+    objects_to_msg,
+)
+from arm_reconstruction.network import build_model
+from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor
+from arm_reconstruction.reconstruction_node import ReconstructionNode
+from arm_sim.camera import look_at
+from arm_sim.conversions import ConversionError
+from arm_sim.objects import object_pool
+from arm_sim.ros_common import latched_qos
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
+
+torch.set_num_threads(2)
+
+
+@pytest.fixture(scope="module")
+def sim():
+    rng = np.random.default_rng(11)
+    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=4)
+    world = SimWorld(scene, robot_arm=False, width=160, height=120)
+    centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
+    frame = world.render(look_at(centre + (0.5, 0.15, 0.4), centre), rng=rng)
+    world.close()
+    return scene, frame
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    """An untrained network: the node's plumbing, not reconstruction accuracy."""
+    path = tmp_path_factory.mktemp("ckpt") / "arm.pt"
+    torch.manual_seed(0)
+    save_checkpoint(path, build_model("arm", 16), {}, {"note": "untrained"})
+    return path
+
+
+def frame_msg(frame):
+    return frame_to_msg(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, Header(frame_id="cam"))
+
+
+def test_messages_round_trip(sim, checkpoint):
+    scene, frame = sim
+    msg = frame_msg(frame)
+    data = frame_from_msg(msg)
+    np.testing.assert_array_equal(data.labels, frame.labels)
+    np.testing.assert_allclose(data.depth_m, frame.depth_m)
+    np.testing.assert_allclose(data.T_world_camera, frame.T_world_camera, atol=1e-9)
+    assert data.instance_ids == sorted(int(i) for i in np.unique(frame.labels) if i > 0)
+    reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(checkpoint)))
+    grids = reconstructor.grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
+    pairs = zip(grids.object_ids, grids.frames, strict=True)
+    truth = np.stack([voxelize_mesh(scene.objects[i - 1].world_mesh(), f) for i, f in pairs]).astype(np.float32)
+    objects = reconstructor.build_objects(grids, truth, frame.labels, frame.K, frame.T_world_camera)
+    ok = [o for o in objects if o.ok]
+    assert ok
+    back = object_from_msg(object_to_msg(ok[0]))
+    np.testing.assert_allclose(back.T_world_object, ok[0].T_world_object, atol=1e-9)
+    np.testing.assert_allclose(back.mesh.vertices, ok[0].mesh.vertices, atol=1e-12)
+    assert len(back.convex_parts) == len(ok[0].convex_parts) and back.grid == ok[0].grid
+    array = objects_to_msg(objects, Header(frame_id="world"), 0.0)
+    assert [o.id for o in array.objects] == [o.id for o in ok]
+    markers = markers_msg(objects, Header(frame_id="world"))
+    assert markers.markers[0].action == Marker.DELETEALL and len(markers.markers) == 1 + len(ok)
+    assert len(markers.markers[1].points) == 3 * len(ok[0].mesh.faces)
+
+
+def test_malformed_frames_raise_conversion_errors(sim):
+    _, frame = sim
+    msg = frame_msg(frame)
+    msg.depth.encoding = "rgb8"
+    with pytest.raises(ConversionError):
+        frame_from_msg(msg)
+    msg = frame_msg(frame)
+    msg.camera_pose.position.x = float("nan")
+    with pytest.raises(ConversionError):
+        frame_from_msg(msg)
+    msg = frame_msg(frame)
+    msg.labels.data = msg.labels.data[:10]
+    with pytest.raises(ConversionError):
+        frame_from_msg(msg)
+
+
+@pytest.fixture
+def ros_context():
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=100 + os.getpid() % 100)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def spin_until(executor, condition, timeout_s=60.0):
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    return condition()
+
+
+def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, ros_context):
+    _, frame = sim
+    node = ReconstructionNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter("checkpoint_path", value=str(checkpoint)),
+            # an untrained network predicts ~0.1 everywhere: a low threshold makes it emit solid grids,
+            # which exercises meshing, intersection removal, decomposition and publishing
+            Parameter("threshold", value=0.05),
+        ],
+    )
+    client = rclpy.create_node("reconstruction_test_client", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(client)
+    diagnostics = []
+    client.create_subscription(DiagnosticArray, "diagnostics", diagnostics.append, 10)
+    publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
+    try:
+        assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
+        bad = frame_msg(frame)
+        bad.camera_pose.orientation.w = float("nan")
+        publisher.publish(bad)
+        assert spin_until(executor, lambda: node.rejected == 1, 20)
+        publisher.publish(frame_msg(frame))
+        assert spin_until(executor, lambda: node.processed == 1, 120)
+        arrays, markers = [], []
+        client.create_subscription(ReconstructedObjectArray, "arm/meshes", arrays.append, latched_qos())
+        client.create_subscription(MarkerArray, "arm/meshes/markers", markers.append, latched_qos())
+        assert spin_until(executor, lambda: arrays and markers and diagnostics, 20), "late subscriber gets the scene"
+        array = arrays[0]
+        ids = sorted(int(i) for i in np.unique(frame.labels) if i > 0)
+        assert [o.id for o in array.objects] == ids and array.header.frame_id == "world"
+        for obj in array.objects:
+            assert len(obj.mesh.triangles) > 0 and 1 <= len(obj.convex_parts) <= 8 and obj.method == "arm"
+            assert obj.grid.resolution == 16
+        assert len(markers[0].markers) == 1 + len(ids)
+        values = {kv.key: kv.value for kv in diagnostics[-1].status[0].values}
+        assert {"grid_ms", "network_ms", "decomposition_ms", "frame_to_meshes_ms", "frames_dropped"} <= set(values)
+        assert node.received == 2 and node.rejected == 1
+    finally:
+        node.close()
+        executor.shutdown()
+        node.destroy_node()
+        client.destroy_node()
+
+
+def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
+    with pytest.raises(ValueError, match="checkpoint"):
+        ReconstructionNode(
+            context=ros_context, parameter_overrides=[Parameter("checkpoint_path", value=str(tmp_path / "x.pt"))]
+        )
