@@ -29,14 +29,10 @@ class MppiConfig:
     num_paths: int = 25
     horizon: int = 5
     control_dt_s: float = 0.02
-    # Twin physics step; None keeps the model's. Must divide control_dt_s.
-    physics_dt_s: float | None = 0.01
     # Temperature relative to the spread of path returns in the current batch.
-    temperature: float = 0.1
+    temperature: float = 0.05
     # AR(1) coefficient of the noise along the horizon (0 = white noise).
-    noise_smoothing: float = 0.6
-    # Low-pass on the executed controls: new = a * planned + (1 - a) * previous.
-    action_filter: float = 1.0
+    noise_smoothing: float = 0.8
     nthread: int = 2
     seed: int = 0
 
@@ -53,8 +49,30 @@ def get_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     return state
 
 
+def free_body_trees(model: mujoco.MjModel) -> np.ndarray:
+    """Kinematic trees rooted at a free joint (the objects)."""
+    roots = [b for b in range(1, model.nbody) if model.body_parentid[b] == 0 and model.body_jntnum[b] > 0
+             and model.jnt_type[model.body_jntadr[b]] == mujoco.mjtJoint.mjJNT_FREE]
+    return np.unique(model.body_treeid[roots]).astype(int)
+
+
+def set_sleep(model: mujoco.MjModel, trees: np.ndarray, start_asleep: bool) -> None:
+    """Enable MuJoCo sleeping; `trees` may sleep when at rest, and start asleep after a reset if asked.
+
+    A sleeping tree costs no collision or constraint work; contact with an awake tree, or a state
+    with nonzero velocity for it, wakes it.
+    """
+    model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    policy = mujoco.mjtSleepPolicy.mjSLEEP_INIT if start_asleep else mujoco.mjtSleepPolicy.mjSLEEP_ALLOWED
+    model.tree_sleep_policy[np.asarray(trees, dtype=int)] = int(policy)
+
+
 class BatchedRollout:
-    """Rolls out [N, H] control-step sequences; returns the state at the end of each control step."""
+    """Rolls out [N, H] control-step sequences; returns the state at the end of each control step.
+
+    With sleep enabled on the model, the per-thread data are reset before every batch so trees with
+    the INIT policy start asleep unless the initial state gives them a velocity.
+    """
 
     def __init__(self, model: mujoco.MjModel, control_dt_s: float, nthread: int = 2):
         self.model = model
@@ -71,16 +89,28 @@ class BatchedRollout:
         self._buffers: dict[tuple[int, int], np.ndarray] = {}
         self._models: dict[int, list[mujoco.MjModel]] = {}
 
-    def __call__(self, initial_state: np.ndarray, controls: np.ndarray) -> np.ndarray:
-        """initial_state [nstate], controls [N, H, nu] -> states [N, H, nstate]."""
+    def substep_controls(self, previous: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        """Targets per physics step [N, H * substeps, nu]: linear from the previous control step's
+        target to this one's (what a trajectory controller interpolating the waypoints applies)."""
+        n, h, nu = controls.shape
+        start = np.concatenate([np.broadcast_to(previous, (n, 1, nu)), controls[:, :-1]], axis=1)
+        frac = (np.arange(1, self.substeps + 1) / self.substeps)[None, None, :, None]
+        ramp = start[:, :, None] + (controls - start)[:, :, None] * frac
+        return np.ascontiguousarray(ramp.reshape(n, h * self.substeps, nu))
+
+    def __call__(self, initial_state: np.ndarray, controls: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        """initial_state [nstate], controls [N, H, nu] after control `previous` [nu] -> states [N, H, nstate]."""
         n, h, nu = controls.shape
         nstep = h * self.substeps
-        ctrl = np.ascontiguousarray(np.repeat(controls, self.substeps, axis=1), dtype=np.float64)
+        ctrl = self.substep_controls(previous, controls)
         out = self._buffers.get((n, nstep))
         if out is None:
             out = np.empty((n, nstep, self.nstate))
             self._buffers[(n, nstep)] = out
         init = np.ascontiguousarray(np.broadcast_to(initial_state, (n, self.nstate)), dtype=np.float64)
+        if self.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP):
+            for data in self._datas:
+                mujoco.mj_resetData(self.model, data)
         models = self._models.get(n)
         if models is None:
             models = self._models[n] = [self.model] * n
@@ -102,14 +132,14 @@ class BatchedRollout:
 
 @dataclass
 class ControlLimits:
-    """Box limits per actuator and the largest change of a target per control step."""
+    """Box limits per actuator and the largest rate of change of a target (ctrl units per second)."""
 
     low: np.ndarray
     high: np.ndarray
-    max_delta: np.ndarray
+    max_rate: np.ndarray
 
     @staticmethod
-    def from_model(model: mujoco.MjModel, max_rate: np.ndarray | float, control_dt_s: float) -> ControlLimits:
+    def from_model(model: mujoco.MjModel, max_rate: np.ndarray | float) -> ControlLimits:
         low = np.full(model.nu, -np.inf)
         high = np.full(model.nu, np.inf)
         limited = model.actuator_ctrllimited.astype(bool)
@@ -121,22 +151,16 @@ class ControlLimits:
                 if model.jnt_limited[j] and model.actuator_gear[a, 0] == 1.0:
                     low[a] = max(low[a], model.jnt_range[j, 0])
                     high[a] = min(high[a], model.jnt_range[j, 1])
-        max_delta = np.broadcast_to(np.asarray(max_rate, dtype=np.float64) * control_dt_s, (model.nu,)).copy()
-        return ControlLimits(low, high, max_delta)
+        rate = np.broadcast_to(np.asarray(max_rate, dtype=np.float64), (model.nu,)).copy()
+        return ControlLimits(low, high, rate)
 
-    def apply(self, previous: np.ndarray, sequences: np.ndarray) -> np.ndarray:
-        """Clip sequences [..., H, nu] that start after control `previous` [nu] to rate and box limits."""
-        deltas = np.diff(
-            np.concatenate(
-                [np.broadcast_to(previous, sequences.shape[:-2] + (1,) + previous.shape), sequences], axis=-2
-            ),
-            axis=-2,
-        )
-        deltas = np.clip(deltas, -self.max_delta, self.max_delta)
-        out = np.empty_like(sequences)
-        current = np.broadcast_to(previous, sequences.shape[:-2] + previous.shape).copy()
-        for t in range(sequences.shape[-2]):
-            current = np.clip(current + deltas[..., t, :], self.low, self.high)
+    def integrate(self, previous: np.ndarray, rates: np.ndarray, dt: float) -> np.ndarray:
+        """Targets [..., H, nu] reached from `previous` [nu] by rates [..., H, nu], within both limits."""
+        steps = np.clip(rates, -self.max_rate, self.max_rate) * dt
+        out = np.empty_like(steps)
+        current = np.broadcast_to(previous, steps.shape[:-2] + previous.shape)
+        for t in range(steps.shape[-2]):
+            current = np.clip(current + steps[..., t, :], self.low, self.high)
             out[..., t, :] = current
         return out
 
@@ -153,7 +177,13 @@ class StepResult:
 
 
 class Mppi:
-    """Warm-started MPPI over a fixed model; the reward and the noise shape may change every step."""
+    """Warm-started MPPI over a fixed model; the reward and the noise shape may change every step.
+
+    The decision variables are the rates of the actuator targets over the horizon (a position servo's
+    target moves at most `max_rate`); the targets are their running integral from the last executed
+    control. The nominal rate sequence carries over between steps (shifted), so consistent motion
+    is kept instead of being re-discovered by the noise every step.
+    """
 
     def __init__(self, model: mujoco.MjModel, config: MppiConfig, limits: ControlLimits):
         self.model = model
@@ -163,9 +193,9 @@ class Mppi:
         self.rng = np.random.default_rng(config.seed)
         self.nominal = np.zeros((config.horizon, model.nu))
 
-    def reset(self, control: np.ndarray) -> None:
-        """Nominal sequence = hold `control` [nu] over the horizon."""
-        self.nominal = np.tile(np.asarray(control, dtype=np.float64), (self.config.horizon, 1))
+    def reset(self) -> None:
+        """Nominal sequence = hold still."""
+        self.nominal = np.zeros((self.config.horizon, self.model.nu))
 
     def sample_noise(self, noise_basis: np.ndarray) -> np.ndarray:
         """Smoothed noise [N, H, nu] = AR(1) white noise [N, H, k] through basis [k, nu]; path 0 is zero."""
@@ -189,29 +219,39 @@ class Mppi:
         noise_basis: np.ndarray,
         fixed_controls: dict[int, float] | None = None,
     ) -> StepResult:
-        """One MPPI iteration from `state`; returns the first control of the updated nominal sequence.
+        """One MPPI iteration from `state`; returns the next control (targets) to execute.
 
-        `noise_basis` [k, nu]: rows are the directions (with scale) noise is drawn along.
-        `fixed_controls`: actuator index -> value forced over the whole horizon (e.g. the gripper).
+        `noise_basis` [k, nu]: rows are rate directions (with scale, ctrl units / s) noise is drawn along.
+        `fixed_controls`: actuator index -> target forced over the whole horizon (e.g. the gripper).
         """
         cfg = self.config
-        candidates = self.nominal[None] + self.sample_noise(noise_basis)
-        if fixed_controls:
-            for a, value in fixed_controls.items():
-                candidates[..., a] = value
-        candidates = self.limits.apply(previous_control, candidates)
-        states = self.rollout(state, candidates)
-        rewards = reward_fn(states, candidates)
-        returns = np.nan_to_num(rewards.sum(axis=1), nan=-1e9, neginf=-1e9)
-        spread = max(float(returns.max() - returns.min()), 1e-9)
-        weights = np.exp((returns - returns.max()) / (cfg.temperature * spread))
+        rates = np.clip(self.nominal[None] + self.sample_noise(noise_basis), -self.limits.max_rate,
+                        self.limits.max_rate)
+        previous = np.asarray(previous_control, dtype=np.float64)
+        fixed = fixed_controls or {}
+        for a in fixed:
+            rates[..., a] = 0.0
+        controls = self.limits.integrate(previous, rates, cfg.control_dt_s)
+        for a, value in fixed.items():
+            controls[..., a] = value
+        states = self.rollout(state, controls, previous)
+        rewards = reward_fn(states, controls)
+        returns = rewards.sum(axis=1)
+        finite = np.isfinite(returns)
+        if not finite.any():
+            raise FloatingPointError("every rollout returned a non-finite reward")
+        best = returns[finite].max()
+        spread = max(float(best - np.median(returns[finite])), 1e-9)
+        weights = np.where(finite, np.exp((np.where(finite, returns, best) - best) / (cfg.temperature * spread)), 0.0)
         weights /= weights.sum()
-        self.nominal = np.einsum("n,nhu->hu", weights, candidates)
-        control = cfg.action_filter * self.nominal[0] + (1.0 - cfg.action_filter) * previous_control
+        self.nominal = np.einsum("n,nhu->hu", weights, rates)
+        control = self.limits.integrate(previous, self.nominal[None, :1], cfg.control_dt_s)[0, 0]
+        for a, value in fixed.items():
+            control[a] = value
         return StepResult(control=control, returns=returns, weights=weights)
 
     def shift(self) -> None:
-        """Warm start: drop the executed first control, repeat the last one."""
+        """Warm start: drop the executed first rate, repeat the last one."""
         self.nominal = np.concatenate([self.nominal[1:], self.nominal[-1:]], axis=0)
 
     def close(self) -> None:

@@ -15,7 +15,16 @@ import mujoco
 import numpy as np
 
 from arm_planner.kinematics import BodyKinematics
-from arm_planner.mppi import STATE_SPEC, ControlLimits, Mppi, MppiConfig, get_state, state_layout
+from arm_planner.mppi import (
+    STATE_SPEC,
+    ControlLimits,
+    Mppi,
+    MppiConfig,
+    free_body_trees,
+    get_state,
+    set_sleep,
+    state_layout,
+)
 from arm_planner.rewards import (
     GRASP_LIFT_M,
     TASK_GRASP,
@@ -42,11 +51,11 @@ class PlanRequest:
 
 @dataclass
 class NoiseConfig:
-    """Sampling noise per control step: task-space (TCP) std mapped through the arm Jacobian + joint std."""
+    """Sampling noise on the target rates: TCP velocity std mapped through the arm Jacobian + joint std."""
 
-    linear_std_m: float = 0.01
-    angular_std_rad: float = 0.03
-    joint_std_rad: float = 0.005
+    linear_std_m_s: float = 0.3
+    angular_std_rad_s: float = 0.5
+    joint_std_rad_s: float = 0.05
     damping: float = 0.05
 
 
@@ -57,6 +66,10 @@ class PlannerConfig:
     weights: RewardWeights = field(default_factory=RewardWeights)
     close_steps: int = 75
     grasp_lift_goal_m: float = 0.10
+    # Let resting objects sleep in the twin (no collision work until touched); see mppi.set_sleep.
+    sleep_objects: bool = True
+    # Physics time the twin is settled for (robot holding still) before planning.
+    settle_s: float = 0.3
     # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
     done_hold_steps: int = 10
 
@@ -83,15 +96,14 @@ class Planner:
     def __init__(self, model: mujoco.MjModel, robot: RobotSpec, config: PlannerConfig | None = None):
         self.config = config or PlannerConfig()
         cfg = self.config.mppi
-        if cfg.physics_dt_s is not None:
-            model.opt.timestep = cfg.physics_dt_s
         self.model = model
         self.robot: ResolvedRobot = robot.resolve(model)
-        self.limits = ControlLimits.from_model(model, self.robot.max_rate, cfg.control_dt_s)
+        self.limits = ControlLimits.from_model(model, self.robot.max_rate)
         self.mppi = Mppi(model, cfg, self.limits)
         self.qpos_offset, _ = state_layout(model)
         self.hand = BodyKinematics(model, self.robot.tcp_body, np.asarray(robot.tcp_offset_m))
         self._data = mujoco.MjData(model)
+        self._object_trees = free_body_trees(model)
 
     def close(self) -> None:
         self.mppi.close()
@@ -106,6 +118,8 @@ class Planner:
             target=target,
             geometry=geometry,
             qpos_offset=self.qpos_offset,
+            arm_qpos_adr=self.robot.qpos_adr,
+            arm_actuators=self.robot.arm_actuators,
             nq=self.model.nq,
             weights=self.config.weights,
         )
@@ -137,8 +151,8 @@ class Planner:
         mujoco.mj_jac(self.model, data, jacp, jacr, tcp_world, self.robot.tcp_body)
         jac = np.concatenate([jacp, jacr])[:, self.robot.dof_adr]
         pinv = jac.T @ np.linalg.inv(jac @ jac.T + n.damping**2 * np.eye(6))
-        stds = np.array([n.linear_std_m] * 3 + [n.angular_std_rad] * 3)
-        arm_rows = np.concatenate([(pinv * stds).T, n.joint_std_rad * np.eye(len(self.robot.arm_actuators))])
+        stds = np.array([n.linear_std_m_s] * 3 + [n.angular_std_rad_s] * 3)
+        arm_rows = np.concatenate([(pinv * stds).T, n.joint_std_rad_s * np.eye(len(self.robot.arm_actuators))])
         basis = np.zeros((arm_rows.shape[0], self.model.nu))
         basis[:, self.robot.arm_actuators] = arm_rows
         return basis
@@ -164,14 +178,20 @@ class Planner:
         """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open."""
         cfg = self.config
         model, data, robot = self.model, self._data, self.robot
-        reward = self._reward(request, geometry)
+        reward = self._last_reward = self._reward(request, geometry)
+        if cfg.sleep_objects:
+            set_sleep(model, self._object_trees, start_asleep=False)
+        mujoco.mj_resetData(model, data)
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
-        mujoco.mj_forward(model, data)
-        start_com = reward.poses(get_state(model, data)[None])[2][0]
         ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], False, model.nu)
         data.ctrl[:] = ctrl
-        self.mppi.reset(ctrl)
-        substeps = self.mppi.rollout.substeps
+        mujoco.mj_step(model, data, nstep=int(round(cfg.settle_s / model.opt.timestep)))
+        data.time = 0.0
+        if cfg.sleep_objects:
+            set_sleep(model, self._object_trees, start_asleep=True)
+        mujoco.mj_forward(model, data)
+        start_com = reward.poses(get_state(model, data)[None])[2][0]
+        self.mppi.reset()
         controls, states, step_ms = [], [], []
         met_streak, met, error = 0, False, float("inf")
         message = "step budget used"
@@ -186,9 +206,11 @@ class Planner:
                 state, ctrl, reward, self.noise_basis(data), {int(robot.gripper_actuator): gripper}
             )
             step_ms.append(1e3 * (time.perf_counter() - t0))
+            self._last_ret, self._last_w = result.returns, result.weights
+            for target in self.mppi.rollout.substep_controls(ctrl, result.control[None, None])[0]:
+                data.ctrl[:] = target
+                mujoco.mj_step(model, data)
             ctrl = result.control
-            data.ctrl[:] = ctrl
-            mujoco.mj_step(model, data, nstep=substeps)
             if not np.all(np.isfinite(data.qpos)):
                 message = f"twin physics diverged at step {step}"
                 met, error = False, float("inf")

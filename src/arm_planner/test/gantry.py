@@ -1,6 +1,7 @@
 """A small test robot: a 4-DoF gantry (x, y, z slides + yaw) with a parallel gripper over a table."""
 
 import mujoco
+
 from arm_planner.robot_spec import RobotSpec
 
 GANTRY_XML = """
