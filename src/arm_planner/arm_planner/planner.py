@@ -47,6 +47,12 @@ class PlanRequest:
     target_body: str
     goal_displacement_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tolerance_m: float = DEFAULT_TOLERANCE_M
+    # Re-planning: the target's centre of mass when the task was first requested (world, m); goals stay
+    # anchored there. None = the target's current centre in the twin.
+    start_com_world: np.ndarray | None = None
+    # Re-planning: task state reached so far ("grasping", "grasped", "pushing") and steps spent in it.
+    resume_state: str | None = None
+    resume_steps_in_state: int = 0
 
 
 @dataclass
@@ -123,20 +129,21 @@ class Planner:
             nq=self.model.nq,
             weights=self.config.weights,
         )
+        displacement = np.asarray(request.goal_displacement_m, dtype=np.float64)
         if request.task == TASK_GRASP:
-            lift = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
-            return GraspReward(**common, goal_displacement=lift, close_steps=self.config.close_steps)
-        if request.task == TASK_REARRANGE:
-            return GraspReward(
-                **common,
-                goal_displacement=np.asarray(request.goal_displacement_m, dtype=np.float64),
-                close_steps=self.config.close_steps,
-            )
-        if request.task == TASK_PUSH:
-            return PushReward(
-                **common, goal_displacement=np.asarray(request.goal_displacement_m, dtype=np.float64)
-            )
-        raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
+            displacement = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
+        if request.task in (TASK_GRASP, TASK_REARRANGE):
+            reward = GraspReward(**common, goal_displacement=displacement, close_steps=self.config.close_steps)
+        elif request.task == TASK_PUSH:
+            reward = PushReward(**common, goal_displacement=displacement)
+        else:
+            raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
+        if request.start_com_world is not None:
+            reward.start_com = np.asarray(request.start_com_world, dtype=np.float64)
+            reward.goal = reward.start_com + displacement
+        if request.resume_state:
+            reward.resume(request.resume_state, request.resume_steps_in_state)
+        return reward
 
     def noise_basis(self, data: mujoco.MjData) -> np.ndarray:
         """Rows: joint-space directions that move the TCP along x, y, z and rotate it, plus joint noise."""
@@ -157,12 +164,12 @@ class Planner:
         basis[:, self.robot.arm_actuators] = arm_rows
         return basis
 
-    def evaluate(self, reward, task: str, state: np.ndarray, tolerance_m: float, start_com: np.ndarray):
+    def evaluate(self, reward, task: str, state: np.ndarray, tolerance_m: float):
         """(met, error_m) of the task at a twin state."""
         _, _, com = reward.poses(state[None])
         com = com[0]
         if task == TASK_GRASP:
-            lift = com[2] - start_com[2]
+            lift = com[2] - reward.start_com[2]
             return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
         error = float(np.linalg.norm(reward.goal - com))
         return error <= tolerance_m, error
@@ -183,14 +190,13 @@ class Planner:
             set_sleep(model, self._object_trees, start_asleep=False)
         mujoco.mj_resetData(model, data)
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
-        ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], False, model.nu)
+        ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], reward.gripper_closed, model.nu)
         data.ctrl[:] = ctrl
         mujoco.mj_step(model, data, nstep=int(round(cfg.settle_s / model.opt.timestep)))
         data.time = 0.0
         if cfg.sleep_objects:
             set_sleep(model, self._object_trees, start_asleep=True)
         mujoco.mj_forward(model, data)
-        start_com = reward.poses(get_state(model, data)[None])[2][0]
         self.mppi.reset()
         controls, states, step_ms = [], [], []
         met_streak, met, error = 0, False, float("inf")
@@ -219,7 +225,7 @@ class Planner:
             states.append(reward.update(executed))
             controls.append(ctrl.copy())
             self.mppi.shift()
-            met, error = self.evaluate(reward, request.task, executed, request.tolerance_m, start_com)
+            met, error = self.evaluate(reward, request.task, executed, request.tolerance_m)
             holding = request.task == TASK_PUSH or reward.state == "grasped"
             met_streak = met_streak + 1 if (met and holding) else 0
             if feedback is not None:

@@ -147,6 +147,7 @@ class GraspReward(TaskReward):
 
     def __post_init__(self):
         g = self.geometry
+        self.start_com = g.com_world.copy()
         self.goal = g.com_world + self.goal_displacement
         z = max(g.table_height_m + 0.015, g.top_z - self.grasp_depth_m)
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
@@ -156,6 +157,13 @@ class GraspReward(TaskReward):
     @property
     def gripper_closed(self) -> bool:
         return self.state != "ungrasped"
+
+    def resume(self, state: str, steps_in_state: int) -> None:
+        """Continue a task already under way (re-planning): grasping for `steps_in_state` steps, or grasped."""
+        if state not in ("ungrasped", "grasping", "grasped"):
+            raise ValueError(f"cannot resume a grasp in state {state!r}")
+        self.state = state
+        self._closing_since = self.step_count - int(steps_in_state)
 
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
@@ -213,6 +221,7 @@ class PushReward(TaskReward):
 
     def __post_init__(self):
         g = self.geometry
+        self.start_com = g.com_world.copy()
         self.goal = g.com_world + self.goal_displacement
         height = g.top_z - g.bottom_z
         self.push_z = g.bottom_z + float(np.clip(0.4 * height, 0.015, 0.05))
@@ -220,6 +229,11 @@ class PushReward(TaskReward):
     @property
     def gripper_closed(self) -> bool:
         return True
+
+    def resume(self, state: str, steps_in_state: int) -> None:
+        if state not in ("approaching", "pushing"):
+            raise ValueError(f"cannot resume a push in state {state!r}")
+        self.state = state
 
     def _contact_point(self, target_pos: np.ndarray) -> np.ndarray:
         to_goal = self.goal[:2] - target_pos[..., :2]

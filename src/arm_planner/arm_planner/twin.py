@@ -175,12 +175,12 @@ class Twin:
     def body_name(self, object_id: int) -> str:
         return self.body_names[object_id]
 
-    def target_geometry(self, object_id: int) -> TargetGeometry:
-        """The target's vertices and centre of mass in the world at its twin pose."""
+    def target_geometry(self, object_id: int, T_world_object: np.ndarray | None = None) -> TargetGeometry:
+        """The target's vertices and centre of mass in the world, at T_world_object (default: as built)."""
         i = list(self.body_names).index(object_id)
         placed = self.scene.objects[i]
         body = self.model.body(self.body_names[object_id])
-        T = placed.T_world_object
+        T = placed.T_world_object if T_world_object is None else np.asarray(T_world_object, dtype=np.float64)
         vertices = np.concatenate([p.vertices for p in placed.model.convex_parts])
         if len(vertices) > MAX_GEOMETRY_VERTICES:
             vertices = vertices[np.linspace(0, len(vertices) - 1, MAX_GEOMETRY_VERTICES).astype(int)]

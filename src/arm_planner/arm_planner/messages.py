@@ -1,0 +1,83 @@
+"""ROS messages <-> planner objects (message classes only, no rclpy)."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from builtin_interfaces.msg import Duration
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from arm_interfaces.action import Manipulate
+from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE
+from arm_planner.twin import TwinObject
+from arm_sim.conversions import ConversionError, msg_to_mesh, pose_to_matrix
+
+TASK_NAMES = {
+    Manipulate.Goal.TASK_GRASP: TASK_GRASP,
+    Manipulate.Goal.TASK_PUSH: TASK_PUSH,
+    Manipulate.Goal.TASK_REARRANGE: TASK_REARRANGE,
+}
+
+
+def twin_objects_from_msg(msg) -> tuple[list[TwinObject], float, dict[int, str]]:
+    """ReconstructedObjectArray -> (objects, table height m, {id: why it was dropped}).
+
+    Malformed objects (bad mesh indices, non-finite poses) are dropped with a reason instead of
+    failing the whole array; an object whose parts are empty keeps its mesh for the twin to decompose.
+    """
+    table_height_m = float(msg.table_height_m)
+    if not np.isfinite(table_height_m):
+        raise ConversionError("table_height_m is not finite")
+    objects, dropped = [], {}
+    for obj in msg.objects:
+        object_id = int(obj.id)
+        try:
+            T = pose_to_matrix(obj.pose)
+            if not np.all(np.isfinite(T)):
+                raise ConversionError("pose is not finite")
+            vertices, faces = msg_to_mesh(obj.mesh)
+            mesh = trimesh.Trimesh(vertices, faces, process=False) if len(faces) else None
+            parts = []
+            for part in obj.convex_parts:
+                part_vertices, part_faces = msg_to_mesh(part)
+                if len(part_vertices):
+                    parts.append(trimesh.Trimesh(part_vertices, part_faces, process=False))
+        except (ConversionError, ValueError, IndexError) as exc:
+            dropped[object_id] = f"malformed object: {exc}"
+            continue
+        if mesh is None and not parts:
+            dropped[object_id] = "empty mesh and no convex parts"
+            continue
+        objects.append(TwinObject(object_id, T, mesh, parts, float(obj.visible_fraction), obj.method))
+    return objects, table_height_m, dropped
+
+
+def trajectory_msg(joint_names, times_s: np.ndarray, positions: np.ndarray, header=None) -> JointTrajectory:
+    """Waypoints (times from start, s; positions [N, len(joint_names)]) -> JointTrajectory."""
+    msg = JointTrajectory()
+    if header is not None:
+        msg.header = header
+    msg.joint_names = list(joint_names)
+    for t, q in zip(np.asarray(times_s, dtype=np.float64), np.asarray(positions, dtype=np.float64), strict=True):
+        sec = int(np.floor(t))
+        point = JointTrajectoryPoint(positions=q.tolist())
+        point.time_from_start = Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+        msg.points.append(point)
+    return msg
+
+
+def joint_state_arrays(msg, arm_joints, finger_joint: str) -> tuple[np.ndarray, float]:
+    """JointState -> (arm joint angles in `arm_joints` order, finger opening m). Raises ConversionError."""
+    names = list(msg.name)
+    positions = np.asarray(msg.position, dtype=np.float64)
+    if len(positions) != len(names):
+        raise ConversionError(f"joint_states has {len(names)} names but {len(positions)} positions")
+    index = {n: i for i, n in enumerate(names)}
+    missing = [n for n in (*arm_joints, finger_joint) if n not in index]
+    if missing:
+        raise ConversionError(f"joint_states lacks {missing}")
+    arm_q = positions[[index[n] for n in arm_joints]]
+    opening = float(positions[index[finger_joint]])
+    if not (np.all(np.isfinite(arm_q)) and np.isfinite(opening)):
+        raise ConversionError("joint_states holds non-finite positions")
+    return arm_q, opening

@@ -1,0 +1,268 @@
+"""plan_node: action /arm/manipulate -> MPPI plan in the MuJoCo twin -> /arm/joint_trajectory.
+
+Subscribes /arm/meshes (reliable, transient-local) and /joint_states and keeps only the latest of
+each. One goal is served at a time; a goal arriving while another plans is rejected. Every refusal
+(no meshes, unknown target, degenerate mesh, goal out of reach, non-finite joint states, twin
+compilation failure, planning error) aborts the goal with the reason in the result; the node keeps
+serving. With replan_period_s > 0 the plan is executed in chunks of that length and re-planned from
+the newest joint states and meshes after each chunk (closed loop).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from arm_interfaces.action import Manipulate
+from arm_interfaces.msg import ReconstructedObjectArray
+from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
+from arm_planner.mppi import MppiConfig
+from arm_planner.planner import PlannerConfig
+from arm_planner.session import ManipulationSession, Outcome
+from arm_sim.conversions import ConversionError
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, spin_node
+
+
+def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
+    mppi = MppiConfig(
+        steps=declare(node, "steps", 200, "MPPI steps per plan (paper: 200)", 1, 5000),
+        num_paths=declare(node, "num_paths", 25, "Sampled paths per step (paper: 25)", 2, 1000),
+        horizon=declare(node, "horizon", 5, "Control steps per path (paper: 5)", 1, 100),
+        control_dt_s=declare(node, "control_dt_s", 0.02, "Control step, seconds (paper: 0.02)", 0.002, 0.2),
+        temperature=declare(node, "temperature", 0.05, "MPPI temperature relative to the return spread", 1e-4, 10.0),
+        noise_smoothing=declare(node, "noise_smoothing", 0.8, "AR(1) coefficient of the noise in time", 0.0, 0.99),
+        nthread=declare(node, "nthread", 2, "Rollout threads (0: calling thread)", 0, 64),
+        seed=declare(node, "seed", 0, "Noise seed", 0, 2**31 - 1),
+    )
+    config = PlannerConfig(mppi=mppi)
+    config.close_steps = declare(node, "close_steps", 75, "Steps the gripper closes for (paper: 75)", 1, 1000)
+    config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
+    config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
+    config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
+    config.done_hold_steps = declare(node, "done_hold_steps", 10, "Stop once the goal held this many steps", 0, 1000)
+    timestep = declare(node, "twin_timestep_s", 0.01, "Twin physics step, s (divides control_dt_s)", 0.001, 0.02)
+    return config, timestep
+
+
+class PlanNode(Node):
+    def __init__(self, **node_options):
+        super().__init__("plan_node", **node_options)
+        config, timestep = _planner_config(self)
+        self.execute_plans = declare(self, "execute", True, "Publish the planned trajectory to the controller")
+        self.replan_period_s = declare(
+            self, "replan_period_s", 0.0, "Closed loop: execute this long, then re-plan (0: open loop)", 0.0, 60.0
+        )
+        self.max_replans = declare(self, "max_replans", 10, "Closed loop: re-plans per goal at most", 0, 1000)
+        self.feedback_every = declare(self, "feedback_every_steps", 10, "Publish feedback every N steps", 1, 1000)
+        self.joint_state_timeout_s = declare(
+            self, "joint_state_timeout_s", 2.0, "Refuse goals when joint states are older than this, s", 0.0, 3600.0
+        )
+        self.session = ManipulationSession(config, timestep)
+        self.finger_joint = self.session.robot.trajectory_joint_names[-1]
+        self.errors = RateLimitedErrors(self.get_logger())
+
+        self._lock = threading.Lock()
+        self._objects = None  # (objects, table_height_m, dropped) from the latest /arm/meshes
+        self._joints = None  # (arm_q, opening, wall time) from the latest valid /joint_states
+        self._joint_error = ""
+        self._busy = False
+        self.goals = self.refusals = self.meshes_received = self.meshes_rejected = 0
+        self.last_step_ms = float("nan")
+        self.last_plan_s = float("nan")
+
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(ReconstructedObjectArray, "arm/meshes", self.on_meshes, latched_qos(),
+                                 callback_group=inputs)
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, 1, callback_group=inputs)
+        self.pub_trajectory = self.create_publisher(JointTrajectory, "arm/joint_trajectory", 1)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.create_timer(1.0, self.publish_diagnostics, callback_group=inputs)
+        self.action_server = ActionServer(
+            self, Manipulate, "arm/manipulate", execute_callback=self.execute, goal_callback=self.on_goal,
+            cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup(),
+        )
+        self.get_logger().info(
+            f"plan_node ready: {config.mppi.steps} steps x {config.mppi.num_paths} paths x horizon "
+            f"{config.mppi.horizon} at {config.mppi.control_dt_s} s, twin step {timestep} s"
+        )
+
+    # --- inputs ------------------------------------------------------------------------------
+    def on_meshes(self, msg: ReconstructedObjectArray) -> None:
+        try:
+            objects, table_height_m, dropped = twin_objects_from_msg(msg)
+        except ConversionError as error:
+            self.meshes_rejected += 1
+            self.errors.error("meshes", f"ignoring malformed /arm/meshes: {error}")
+            return
+        for object_id, reason in dropped.items():
+            self.errors.error(f"object {object_id}", f"object {object_id} left out of the twin: {reason}")
+        with self._lock:
+            self._objects = (objects, table_height_m, dropped)
+            self.meshes_received += 1
+
+    def on_joint_states(self, msg: JointState) -> None:
+        try:
+            arm_q, opening = joint_state_arrays(msg, self.session.robot.arm_joints, self.finger_joint)
+        except ConversionError as error:
+            with self._lock:
+                self._joint_error = str(error)
+            self.errors.error("joint_states", f"ignoring joint states: {error}")
+            return
+        with self._lock:
+            self._joints = (arm_q, opening, time.monotonic())
+            self._joint_error = ""
+
+    # --- action ------------------------------------------------------------------------------
+    def on_goal(self, goal) -> GoalResponse:
+        with self._lock:
+            if self._busy:
+                self.errors.error("busy", "rejecting a manipulation goal: another one is being served")
+                return GoalResponse.REJECT
+            self._busy = True
+        return GoalResponse.ACCEPT
+
+    def _robot_state(self):
+        with self._lock:
+            joints, error, objects = self._joints, self._joint_error, self._objects
+        if error:
+            return None, f"latest joint states are invalid: {error}", objects
+        if joints is None:
+            return None, "no joint states received yet", objects
+        if self.joint_state_timeout_s > 0 and time.monotonic() - joints[2] > self.joint_state_timeout_s:
+            return None, f"joint states are older than {self.joint_state_timeout_s} s", objects
+        return joints, "", objects
+
+    def _plan_once(self, goal_handle, task: str, goal, resume: tuple | None, start_com) -> Outcome:
+        joints, problem, objects = self._robot_state()
+        if problem:
+            return Outcome(False, problem)
+        if objects is None:
+            return Outcome(False, "no reconstructed objects received yet (/arm/meshes)")
+        self.session.set_objects(objects[0], objects[1])
+        feedback = Manipulate.Feedback()
+
+        def on_step(step: int, total: int, state: str, error_m: float) -> None:
+            if step % self.feedback_every == 0 or step == total:
+                feedback.step, feedback.total_steps, feedback.state = step, total, state
+                feedback.predicted_error_m = float(error_m)
+                goal_handle.publish_feedback(feedback)
+
+        displacement = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
+        started = time.perf_counter()
+        outcome = self.session.request(
+            task, int(goal.target_id), displacement, float(goal.tolerance_m), joints[0], joints[1],
+            feedback=on_step, should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+            start_com_world=start_com, resume_state=resume[0] if resume else None,
+            resume_steps_in_state=resume[1] if resume else 0,
+        )
+        self.last_plan_s = time.perf_counter() - started
+        if outcome.result is not None and len(outcome.result.step_ms):
+            self.last_step_ms = float(np.median(outcome.result.step_ms))
+        return outcome
+
+    def _publish(self, outcome: Outcome, count: int | None = None) -> JointTrajectory:
+        result = outcome.result
+        n = len(result.times_s) if count is None else count
+        msg = trajectory_msg(result.joint_names, result.times_s[:n], result.joint_positions[:n])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        if self.execute_plans and n:
+            self.pub_trajectory.publish(msg)
+        return msg
+
+    def execute(self, goal_handle):
+        try:
+            return self._execute(goal_handle)
+        except Exception as error:  # the node must keep serving whatever happens inside one goal
+            self.errors.error("execute", f"goal failed: {type(error).__name__}: {error}")
+            goal_handle.abort()
+            return Manipulate.Result(success=False, message=f"internal error: {type(error).__name__}: {error}",
+                                     final_error_m=float("nan"))
+        finally:
+            with self._lock:
+                self._busy = False
+
+    def _execute(self, goal_handle):
+        goal = goal_handle.request
+        self.goals += 1
+        task = TASK_NAMES.get(int(goal.task))
+        if task is None:
+            outcome = Outcome(False, f"unknown task {goal.task}; expected one of {sorted(TASK_NAMES)}")
+        else:
+            outcome, trajectory = self._run(goal_handle, task, goal)
+        if not outcome.planned:
+            self.refusals += 1
+            self.errors.error("refused", f"manipulation goal refused: {outcome.message}")
+            goal_handle.abort()
+            return Manipulate.Result(success=False, message=outcome.message, final_error_m=float("nan"))
+        result = Manipulate.Result(
+            success=bool(outcome.success), message=outcome.message, final_error_m=float(outcome.final_error_m),
+            trajectory=trajectory,
+        )
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+            result.message = "canceled: " + result.message
+        else:
+            goal_handle.succeed()
+        return result
+
+    def _run(self, goal_handle, task: str, goal):
+        outcome = self._plan_once(goal_handle, task, goal, None, None)
+        if not outcome.planned or self.replan_period_s <= 0:
+            return outcome, (self._publish(outcome) if outcome.planned else JointTrajectory())
+        start_com, resume, executed = outcome.start_com_world, None, JointTrajectory()
+        for _ in range(self.max_replans + 1):
+            result = outcome.result
+            chunk = int(np.searchsorted(result.times_s, self.replan_period_s, side="right"))
+            last = chunk >= len(result.times_s) or goal_handle.is_cancel_requested
+            sent = self._publish(outcome, None if last else chunk)
+            executed.joint_names = sent.joint_names
+            executed.points.extend(sent.points)
+            if last:
+                break
+            time.sleep(float(result.times_s[chunk - 1]))
+            state = result.states[chunk - 1]
+            steps_in_state = next((i for i, s in enumerate(reversed(result.states[:chunk])) if s != state), chunk)
+            resume = (state, steps_in_state)
+            replanned = self._plan_once(goal_handle, task, goal, resume, start_com)
+            if not replanned.planned:
+                self.errors.error("replan", f"re-planning failed, keeping the executed prefix: {replanned.message}")
+                break
+            outcome = replanned
+        return outcome, executed
+
+    # --- diagnostics -------------------------------------------------------------------------
+    def publish_diagnostics(self) -> None:
+        with self._lock:
+            objects = len(self._objects[0]) if self._objects else 0
+            busy = self._busy
+        values = {
+            "goals": self.goals, "refusals": self.refusals, "busy": busy, "twin_objects": objects,
+            "twin_builds": self.session.twin_builds, "meshes_received": self.meshes_received,
+            "meshes_rejected": self.meshes_rejected, "last_mppi_step_ms": self.last_step_ms,
+            "last_plan_s": self.last_plan_s,
+        }
+        level = DiagnosticStatus.OK if objects else DiagnosticStatus.WARN
+        message = "ok" if objects else "waiting for /arm/meshes"
+        self.pub_diag.publish(diagnostics_msg(self, "planner", values, level, message))
+
+    def close(self) -> None:
+        self.action_server.destroy()
+        self.session.close()
+
+
+def main(args=None) -> int:
+    return spin_node(PlanNode, args, executor_factory=lambda: MultiThreadedExecutor(num_threads=3))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
