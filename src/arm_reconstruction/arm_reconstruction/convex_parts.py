@@ -162,6 +162,10 @@ class ConvexDecomposer:
         self._cache: OrderedDict[str, list[np.ndarray]] = OrderedDict()
         self.cache_hits = 0
 
+    def clear_cache(self) -> None:
+        self._cache.clear()
+        self.cache_hits = 0
+
     def _key(self, mesh: trimesh.Trimesh) -> str:
         sha = hashlib.sha1(np.ascontiguousarray(mesh.vertices, dtype=np.float32).tobytes())
         sha.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())

@@ -117,9 +117,26 @@ def resolve_device(device: str | torch.device = "cpu") -> torch.device:
     return resolved
 
 
+def prepare_for_inference(model: nn.Module, device: str | torch.device = "cpu") -> nn.Module:
+    """Eval mode on device; on the CPU also channels-last 3D weights (about 1.5x faster with oneDNN
+    here). Modifies and returns model; meant for inference-only models (the pipeline's)."""
+    device = resolve_device(device)
+    model.eval().to(device)
+    if device.type == "cpu":
+        model.to(memory_format=torch.channels_last_3d)
+    return model
+
+
+def _channels_last(model: nn.Module) -> bool:
+    for parameter in model.parameters():
+        if parameter.ndim == 5:
+            return parameter.is_contiguous(memory_format=torch.channels_last_3d) and not parameter.is_contiguous()
+    return False
+
+
 def predict_occupancy(model: nn.Module, grids, device: str | torch.device = "cpu", batch_size: int = 16) -> np.ndarray:
     """Occupancy probabilities float32 [B, d, d, d] for grids [B, 4 (or C), d, d, d] (numpy or torch).
-    Runs in eval mode without gradients, batch_size objects at a time."""
+    Runs in eval mode without gradients, batch_size objects at a time, in the model's memory format."""
     device = resolve_device(device)
     tensor = torch.as_tensor(np.asarray(grids, dtype=np.float32)) if not torch.is_tensor(grids) else grids
     if tensor.ndim != 5:
@@ -132,7 +149,7 @@ def predict_occupancy(model: nn.Module, grids, device: str | torch.device = "cpu
     parameter = next(model.parameters(), None)
     if parameter is not None and parameter.device != device:
         model.to(device)
-    memory_format = torch.channels_last_3d if device.type == "cpu" else torch.contiguous_format
+    memory_format = torch.channels_last_3d if _channels_last(model) else torch.contiguous_format
     outputs = []
     with torch.inference_mode():
         for start in range(0, len(tensor), batch_size):

@@ -26,7 +26,7 @@ from .meshing import (
     ray_carve,
     remove_intersections,
 )
-from .network import METHODS, canonical_method, predict_occupancy, resolve_device
+from .network import METHODS, canonical_method, predict_occupancy, prepare_for_inference, resolve_device
 
 STAGES = ("grid", "network", "postprocess", "meshing", "intersections", "decomposition", "visibility")
 
@@ -154,8 +154,7 @@ class Reconstructor:
             if getattr(model, "variant", self.settings.variant) != self.settings.variant:
                 raise CheckpointError(f"model variant {model.variant!r} does not fit method {self.settings.method!r}")
             self.checkpoint_config = {"variant": self.settings.variant, "resolution": getattr(model, "resolution", 0)}
-            model = model.to(self.device).eval()
-        self.model = model
+        self.model = prepare_for_inference(model, self.device)
         self.resolution = int(self.settings.resolution or getattr(model, "resolution", 32))
         if getattr(model, "resolution", self.resolution) != self.resolution:
             raise CheckpointError(f"model resolution {model.resolution} differs from requested {self.resolution}")

@@ -76,3 +76,15 @@ def test_cuda_matches_cpu():
     grids = (np.random.default_rng(2).random((2, 4, 16, 16, 16)) > 0.5).astype(np.float32)
     on_cpu = predict_occupancy(model, grids, "cpu")
     np.testing.assert_allclose(on_cpu, predict_occupancy(model, grids, "cuda"), atol=1e-3)
+
+
+def test_inference_preparation_keeps_the_outputs():
+    import copy
+
+    from arm_reconstruction.network import prepare_for_inference
+
+    model = build_model("arm", 16)
+    grids = (np.random.default_rng(3).random((3, 4, 16, 16, 16)) > 0.5).astype(np.float32)
+    before = predict_occupancy(model, grids)
+    prepared = prepare_for_inference(copy.deepcopy(model), "cpu")
+    np.testing.assert_allclose(predict_occupancy(prepared, grids), before, atol=1e-5)
