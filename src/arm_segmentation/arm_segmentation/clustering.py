@@ -31,6 +31,8 @@ class ClusterParams:
     chroma_edge_threshold: float = 0.15
     merge_chroma_threshold: float = 0.16
     contact_radius_px: int = 2
+    small_fragment_px: int = 100
+    small_fragment_tolerance: float = 1.6
     min_contact_px: int = 3
     min_fragment_px: int = 3
     min_instance_area_m2: float = 3e-4
@@ -191,7 +193,10 @@ def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams) 
     if len(pairs) and params.use_colour:
         means = _region_means(labels, n, chroma)
         colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
-        merge = _should_merge(counts, params) & (colour_distance <= params.merge_chroma_threshold)
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        small = np.minimum(sizes[pairs[:, 0]], sizes[pairs[:, 1]]) < params.small_fragment_px
+        limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
+        merge = _should_merge(counts, params) & (colour_distance <= limit)
         labels = _compact(_union(n, pairs[merge])[labels], 0)
         pairs, counts = fragment_contacts(labels, depth_m, params)
     n = int(labels.max())

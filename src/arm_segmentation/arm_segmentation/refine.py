@@ -24,6 +24,7 @@ class RefineParams:
     table_colour_threshold: float = 0.1
     search_radius_px: int = 14
     colour_blur_px: int = 1
+    min_instance_area_m2: float = 1.5e-4
 
 
 def upsample(image: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
@@ -118,6 +119,12 @@ def refine_full_resolution(
             break
         out[gy[ok], gx[ok]] = owner[ok]
         todo[gy[ok], gx[ok]] = False
+    pixel_area = np.where(has_depth, depth * depth, 0.0) / (K[0, 0] * K[1, 1])
+    instance_area = np.bincount(out.ravel(), weights=pixel_area.ravel(), minlength=n + 1)
+    keep = instance_area >= params.min_instance_area_m2
+    keep[0] = False
+    remap = np.zeros(len(keep), dtype=np.uint16)
+    remap[keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.uint16)
     full = np.zeros(shape, dtype=np.uint16)
-    full[crop] = out
+    full[crop] = remap[out]
     return full

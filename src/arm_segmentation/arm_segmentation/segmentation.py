@@ -21,6 +21,7 @@ from arm_segmentation.refine import RefineParams, refine_full_resolution, upsamp
 from arm_segmentation.table_plane import (
     SupportLevel,
     TableParams,
+    band_for_depth,
     classify_heights,
     estimate_support_levels,
     pixel_area_m2,
@@ -101,12 +102,46 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     labels = cluster_instances(
         points_camera, normals_camera, smoothed, chroma, objects, candidates, valid, area, table_chroma, params.cluster
     )
+    labels = drop_support_structure(labels, points_world, smoothed, support, levels, params.table)
     if stride > 1:
         labels = refine_full_resolution(
             labels, chroma, support, table_chroma, stride, rgb_full, depth_full, K_full, T, params.table, params.refine
         )
         table = upsample(table, stride, depth_full.shape)
     return SegmentationResult(labels=labels, table_mask=table, levels=levels)
+
+
+def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:
+    """Remove instances that are the side of a higher support level (a shelf's front face).
+
+    Such an instance stands on a lower level and reaches up to a higher level's height at that
+    level's footprint; objects on the higher level are measured from it and are kept.
+    """
+    n = int(labels.max())
+    if n == 0 or len(levels) < 2:
+        return labels
+    z = points_world[..., 2]
+    has = (labels > 0) & (depth_m > 0)
+    band = band_for_depth(depth_m, params)
+    ids = np.arange(1, n + 1)
+    support_of = ndimage.maximum(np.nan_to_num(support, nan=-np.inf), labels, ids)
+    drop = np.zeros(n + 1, dtype=bool)
+    for level in levels:
+        near_top = has & (np.abs(z - level.height_m) <= 2 * band)
+        ys, xs = np.nonzero(near_top)
+        inside = level.contains_xy(points_world[ys, xs, :2], params.footprint_margin_m)
+        reaches = np.bincount(labels[ys[inside], xs[inside]], minlength=n + 1) > 0
+        drop[1:] |= reaches[1:] & (np.asarray(support_of) < level.height_m - 0.02)
+    if not np.any(drop):
+        return labels
+    return _renumber(np.where(drop[labels], 0, labels))
+
+
+def _renumber(labels: np.ndarray) -> np.ndarray:
+    used = np.unique(labels)
+    remap = np.zeros(int(labels.max()) + 1, dtype=np.uint16)
+    remap[used[used > 0]] = np.arange(1, int(np.count_nonzero(used)) + 1, dtype=np.uint16)
+    return remap[labels]
 
 
 def segment(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None) -> np.ndarray:

@@ -73,6 +73,7 @@ def estimate_support_levels(
     up = valid & (normals_world[..., 2] >= cos_tol)
     if not np.any(up):
         return []
+    up_y, up_x = np.nonzero(up)
     z = points_world[..., 2][up].astype(np.float64)
     w = area_m2[up].astype(np.float64)
     xy = points_world[..., :2][up]
@@ -96,7 +97,7 @@ def estimate_support_levels(
         if not np.any(near):
             continue
         height = _weighted_median(z[near], w[near])
-        inliers = np.abs(z - height) <= params.band_m
+        inliers = _coherent(np.abs(z - height) <= params.band_m, up_y, up_x, w, up.shape, params)
         area = float(w[inliers].sum())
         if area < params.min_table_area_m2:
             continue
@@ -157,6 +158,26 @@ def classify_points(
     """Split valid pixels into (table_mask, object_mask), both HxW bool (see classify_heights)."""
     support = support_heights(points_world, depth_m, levels, params)
     return classify_heights(points_world[..., 2], depth_m, support, params)
+
+
+def _coherent(inliers, ys, xs, weights, shape, params: TableParams) -> np.ndarray:
+    """Keep the inliers that belong to large connected regions of the image.
+
+    A plane seen as many small patches at one height (the tops of equal boxes) is no table: the
+    largest region must reach min_table_area_m2, and only regions of at least a tenth of that
+    take part in the footprint.
+    """
+    image = np.zeros(shape, dtype=bool)
+    image[ys[inliers], xs[inliers]] = True
+    regions, n = ndimage.label(image, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return np.zeros_like(inliers)
+    region_of = regions[ys, xs]
+    region_area = np.bincount(region_of, weights=np.where(inliers, weights, 0.0), minlength=n + 1)
+    region_area[0] = 0.0
+    if region_area.max() < params.min_table_area_m2:
+        return np.zeros_like(inliers)
+    return inliers & (region_area[region_of] >= 0.1 * params.min_table_area_m2)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:

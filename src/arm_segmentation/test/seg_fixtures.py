@@ -32,9 +32,10 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
 
 
 def render(boxes, T_world_camera, K=None, width=640, height=480, table_levels=((0.0, 0.5),),
-           table_rgb=(150, 130, 110), floor_z=-0.75):
+           table_rgb=(150, 130, 110), floor_z=-0.75, supports=()):
     """Ray-cast boxes standing on square table levels (height_m, half_extent_m) over a floor.
 
+    `supports` are further boxes (shelves, steps) drawn in the table colour with label 0.
     Returns (rgb uint8, depth_m float32, labels uint16 with box i -> i + 1, K).
     """
     K = intrinsics(width, height) if K is None else K
@@ -54,7 +55,8 @@ def render(boxes, T_world_camera, K=None, width=640, height=480, table_levels=((
         hit = origin[:2] + t[..., None] * rays_w[..., :2]
         ok = (t > 0) & (np.abs(hit).max(-1) <= extent) & (t < best_t)
         best_t[ok], label[ok], normal[ok], colour[ok] = t[ok], 0, (0, 0, 1), rgb
-    for i, box in enumerate(boxes):
+    all_boxes = [(i + 1, b, b.rgb) for i, b in enumerate(boxes)] + [(0, b, table_rgb) for b in supports]
+    for label_id, box, box_rgb in all_boxes:
         c, s = np.cos(box.yaw_rad), np.sin(box.yaw_rad)
         R_wb = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
         o_b = R_wb.T @ (origin - np.asarray(box.centre))
@@ -70,7 +72,7 @@ def render(boxes, T_world_camera, K=None, width=640, height=480, table_levels=((
         ok = (t_enter <= t_exit) & (t_enter > 0) & (t_enter < best_t)
         n_b = np.zeros((height, width, 3))
         np.put_along_axis(n_b, axis[..., None], -np.sign(np.take_along_axis(d_b, axis[..., None], -1)), -1)
-        best_t[ok], label[ok], normal[ok], colour[ok] = t_enter[ok], i + 1, (n_b @ R_wb.T)[ok], box.rgb
+        best_t[ok], label[ok], normal[ok], colour[ok] = t_enter[ok], label_id, (n_b @ R_wb.T)[ok], box_rgb
     light = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
     shade = 0.45 + 0.55 * np.clip(normal @ light, 0, 1)
     rgb = np.clip(colour * shade[..., None], 0, 255).astype(np.uint8)

@@ -1,0 +1,122 @@
+"""segmentation_node: synchronizes RGB, depth, camera_info and camera pose (and, with
+use_ground_truth_masks, the simulator's label image), segments the latest complete frame and
+publishes arm_interfaces/SegmentedFrame plus a colourised overlay for viewers."""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from arm_interfaces.msg import SegmentedFrame
+from arm_segmentation.clustering import ClusterParams
+from arm_segmentation.frame_processing import FrameError, segment_messages
+from arm_segmentation.segmentation import SegmentationParams
+from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
+from arm_segmentation.table_plane import TableParams
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, sensor_qos, spin_node
+
+INPUTS = ("rgb", "depth", "camera_info", "pose", "labels")
+
+
+def stamp_s(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+class SegmentationNode(Node):
+    def __init__(self):
+        super().__init__("segmentation_node")
+        self.use_ground_truth = declare(
+            self, "use_ground_truth_masks", False, "Pass the simulator's label image through instead of segmenting"
+        )
+        slop_s = declare(self, "sync_tolerance_s", 0.02, "Largest stamp difference within one frame, seconds", 0.0, 1.0)
+        queue = declare(self, "sync_queue_size", 5, "Messages kept per input while matching stamps", 1, 50)
+        reliability = declare(
+            self, "image_reliability", "best_effort", "Subscription QoS reliability",
+            choices=["best_effort", "reliable"],
+        )
+        stride = declare(self, "working_stride", 2, "Subsampling of the working grid (1 = full resolution)", 1, 4)
+        min_table = declare(
+            self, "min_table_area_m2", 0.08, "Smallest horizontal plane taken as a table, m^2", 0.005, 10.0
+        )
+        max_height = declare(self, "max_object_height_m", 0.6, "Tallest object above its table, metres", 0.02, 3.0)
+        min_area = declare(self, "min_instance_area_m2", 3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
+        use_colour = declare(self, "use_colour", True, "Use colour cues (off: geometry only)")
+        self.params = SegmentationParams(
+            working_stride=stride,
+            table=TableParams(min_table_area_m2=min_table, max_object_height_m=max_height),
+            cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
+        )
+        n_inputs = 5 if self.use_ground_truth else 4
+        self.sync = ApproximateTimeSynchronizer(n_inputs, slop_s, queue)
+        self.errors = RateLimitedErrors(self.get_logger())
+        qos = sensor_qos(reliability, depth=1)
+        topics = [
+            (Image, "camera/color/image_raw"),
+            (Image, "camera/depth/image_raw"),
+            (CameraInfo, "camera/camera_info"),
+            (PoseStamped, "camera/pose"),
+            (Image, "sim/ground_truth/labels"),
+        ]
+        for index, (msg_type, topic) in enumerate(topics[:n_inputs]):
+            self.create_subscription(msg_type, topic, lambda msg, i=index: self.on_message(i, msg), qos)
+        self.pub_frame = self.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
+        self.pub_overlay = self.create_publisher(Image, "arm/segmentation/overlay", qos)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.frames_published = 0
+        self.frames_rejected = 0
+        self.last_latency_ms = 0.0
+        self.last_instances = 0
+        self.last_error = ""
+        self.create_timer(1.0, self.publish_diagnostics)
+        mode = "ground-truth masks" if self.use_ground_truth else "segmentation"
+        self.get_logger().info(f"segmentation_node ready ({mode}, sync tolerance {slop_s * 1e3:.0f} ms)")
+
+    def on_message(self, index: int, msg) -> None:
+        stamp = stamp_s(msg)
+        if not (stamp == stamp and abs(stamp) < 1e12):
+            self.errors.error("bad_stamp", f"{INPUTS[index]} message has an invalid stamp")
+            return
+        match = self.sync.add(index, stamp, msg)
+        if match is not None:
+            self.process(*match[1])
+
+    def process(self, rgb, depth, info, pose, labels=None) -> None:
+        start = time.perf_counter()
+        try:
+            frame, overlay = segment_messages(rgb, depth, info, pose, labels, self.params)
+        except FrameError as error:
+            self.frames_rejected += 1
+            self.last_error = str(error)
+            self.errors.error(type(error).__name__, f"frame at t={stamp_s(depth):.3f} s rejected: {error}")
+            return
+        self.pub_frame.publish(frame)
+        self.pub_overlay.publish(overlay)
+        self.frames_published += 1
+        self.last_latency_ms = 1e3 * (time.perf_counter() - start)
+        self.last_instances = len(frame.instance_ids)
+
+    def publish_diagnostics(self) -> None:
+        level = DiagnosticStatus.OK
+        message = "ok"
+        if self.frames_rejected and self.last_error:
+            level, message = DiagnosticStatus.WARN, f"last rejected frame: {self.last_error}"
+        values = {
+            "frames_published": self.frames_published,
+            "frames_rejected": self.frames_rejected,
+            "messages_received": self.sync.stats.received,
+            "stale_messages_dropped": self.sync.stats.dropped_stale,
+            "last_latency_ms": self.last_latency_ms,
+            "last_instances": self.last_instances,
+            "ground_truth_masks": self.use_ground_truth,
+        }
+        self.pub_diag.publish(diagnostics_msg(self, "segmentation", values, level, message))
+
+
+def main(args=None) -> int:
+    return spin_node(SegmentationNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
