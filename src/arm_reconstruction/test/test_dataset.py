@@ -1,0 +1,101 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from arm_reconstruction import datagen
+from arm_reconstruction.datagen import pack_bits
+from arm_reconstruction.dataset import DatasetError, VoxelDataset, random_symmetry, unpack_bits, verify_manifest
+
+
+def box_samples(n: int, resolution: int, rng: np.random.Generator) -> dict:
+    d = resolution
+    columns = {key: [] for key in datagen._SAMPLE_KEYS}
+    for index in range(n):
+        occupancy = np.zeros((d, d, d), bool)
+        lo = rng.integers(d // 4, d // 2, size=2)
+        size = rng.integers(2, d // 4, size=3)
+        occupancy[lo[0] : lo[0] + size[0], lo[1] : lo[1] + size[1], : size[2]] = True
+        others = np.zeros((d, d, d), bool)
+        others[:, : d // 8, : d // 4] = True
+        visible = occupancy & ~np.roll(occupancy, -1, axis=2)  # the top face
+        observed_empty = np.zeros((d, d, d), bool)
+        observed_empty[..., size[2] + 1 :] = True
+        grid = np.stack([visible, others, observed_empty & ~others, ~(visible | others | observed_empty)])
+        columns["grids"].append(grid)
+        columns["occupancy"].append(occupancy)
+        columns["others"].append(others)
+        columns["visible_fraction"].append(float(rng.uniform(0.2, 1.0)))
+        columns["visible_pixels"].append(100)
+        columns["category"].append("box")
+        columns["object_scale"].append(1.0)
+        columns["scene_index"].append(0)
+        columns["view_index"].append(0)
+        columns["object_index"].append(index)
+        columns["grid_origin_world"].append(np.zeros(3))
+        columns["voxel_size_m"].append(0.01)
+        columns["table_height_m"].append(0.0)
+        columns["T_world_camera"].append(np.eye(4))
+    return columns
+
+
+def write_box_dataset(root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0):
+    for shard_seed in range(shards):
+        rng = np.random.default_rng([seed, shard_seed])
+        arrays = datagen._to_arrays(box_samples(per_shard, resolution, rng), shard_seed, split, resolution, 4.0)
+        datagen.write_shard(datagen.shard_path(root, split, shard_seed), arrays)
+    return datagen.write_manifest(root, split, {"synthetic": "boxes"})
+
+
+def test_pack_and_unpack_round_trip():
+    rng = np.random.default_rng(0)
+    grids = rng.random((3, 4, 8, 8, 8)) > 0.5
+    np.testing.assert_array_equal(unpack_bits(pack_bits(grids), (4, 8, 8, 8)), grids)
+
+
+def test_dataset_batches_match_what_was_written(tmp_path):
+    manifest = write_box_dataset(tmp_path, "train", shards=2, per_shard=5)
+    assert manifest["n_samples"] == 10 and manifest["n_shards"] == 2
+    dataset = VoxelDataset(tmp_path, "train", verify=True)
+    assert len(dataset) == 10 and dataset.resolution == 16 and dataset.seeds == [0, 1]
+    expected = box_samples(5, 16, np.random.default_rng([0, 1]))
+    batch = dataset.batch([5, 9])
+    assert batch["grids"].shape == (2, 4, 16, 16, 16) and batch["grids"].dtype == torch.float32
+    np.testing.assert_array_equal(batch["occupancy"][0].numpy(), expected["occupancy"][0])
+    np.testing.assert_array_equal(batch["grids"][1].numpy(), expected["grids"][4])
+    np.testing.assert_array_equal(batch["others"][1].numpy(), expected["others"][4])
+    assert batch["visible_fraction"][0].item() == pytest.approx(expected["visible_fraction"][0])
+
+
+def test_manifest_detects_tampered_shards(tmp_path):
+    write_box_dataset(tmp_path, "train", shards=1, per_shard=2)
+    verify_manifest(tmp_path / "train")
+    shard = next((tmp_path / "train").glob("shard_*.npz"))
+    shard.write_bytes(shard.read_bytes()[:-10])
+    with pytest.raises(DatasetError):
+        verify_manifest(tmp_path / "train")
+    manifest = json.loads((tmp_path / "train" / "manifest.json").read_text())
+    assert manifest["shards"][0]["samples"] == 2
+
+
+def test_missing_split_raises(tmp_path):
+    with pytest.raises(DatasetError):
+        VoxelDataset(tmp_path, "test")
+
+
+def test_random_symmetry_keeps_gravity_and_voxel_counts():
+    write = box_samples(4, 16, np.random.default_rng(3))
+    batch = {
+        "grids": torch.tensor(np.stack(write["grids"]), dtype=torch.float32),
+        "occupancy": torch.tensor(np.stack(write["occupancy"]), dtype=torch.float32),
+        "visible_fraction": torch.zeros(4),
+    }
+    generator = torch.Generator().manual_seed(0)
+    seen = set()
+    for _ in range(12):
+        out = random_symmetry(batch, generator)
+        assert torch.equal(out["occupancy"].sum(dim=(1, 2)), batch["occupancy"].sum(dim=(1, 2)))  # per z layer
+        assert torch.equal(out["grids"].sum(dim=(2, 3)), batch["grids"].sum(dim=(2, 3)))
+        seen.add(out["occupancy"].numpy().tobytes())
+    assert len(seen) > 2
