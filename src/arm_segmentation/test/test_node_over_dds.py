@@ -1,0 +1,136 @@
+"""segmentation_node in its own process, fed over real DDS by this test."""
+
+import os
+import pathlib
+import random
+import signal
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(100, 200)))
+os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from seg_fixtures import Box, add_noise, look_at, render  # noqa: E402
+from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from std_msgs.msg import Header  # noqa: E402
+
+from arm_interfaces.msg import SegmentedFrame  # noqa: E402
+from arm_segmentation.metrics import segmentation_metrics  # noqa: E402
+from arm_sim.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+EXECUTABLE = ROOT / "install" / "arm_segmentation" / "lib" / "arm_segmentation" / "segmentation_node"
+CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
+
+
+def start(*params):
+    cmd = [str(EXECUTABLE), "--ros-args", "--params-file", str(ROOT / "config" / "segmentation_node.yaml")]
+    for p in params:
+        cmd += ["-p", p]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(),
+                            start_new_session=True, text=True)
+
+
+def stop(process) -> tuple[int, str]:
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    return process.returncode, process.stdout.read()
+
+
+def spin_until(node, predicate, timeout_s):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if predicate():
+            return True
+    return predicate()
+
+
+@pytest.fixture
+def probe():
+    if not EXECUTABLE.exists():
+        pytest.skip("segmentation_node is not installed (colcon build)")
+    rclpy.init()
+    node = rclpy.create_node("segmentation_probe")
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def frame_messages(stamp_s, rgb, depth, K, labels=None):
+    def header(frame_id="camera_color_optical_frame"):
+        h = Header(frame_id=frame_id)
+        h.stamp.sec, h.stamp.nanosec = int(stamp_s), int(round((stamp_s % 1) * 1e9))
+        return h
+
+    pose = PoseStamped(header=header("world"), pose=matrix_to_pose(CAMERA))
+    msgs = [numpy_to_image(rgb, "rgb8", header()), numpy_to_image(depth, "32FC1", header()),
+            camera_info_from_K(K, depth.shape[1], depth.shape[0], header()), pose]
+    if labels is not None:
+        msgs.append(numpy_to_image(labels, "16UC1", header()))
+    return msgs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ground_truth", [False, True])
+def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_truth):
+    boxes = [Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
+             Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60))]
+    rgb, depth, gt, K = render(boxes, CAMERA)
+    depth = add_noise(depth, np.random.default_rng(0))
+    node = start(f"use_ground_truth_masks:={str(ground_truth).lower()}", "image_reliability:=reliable")
+    got = {"frames": [], "overlay": [], "diag": []}
+    probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
+    probe.create_subscription(Image, "arm/segmentation/overlay", got["overlay"].append, 10)
+    probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
+    topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"),
+              (CameraInfo, "camera/camera_info"), (PoseStamped, "camera/pose"), (Image, "sim/ground_truth/labels")]
+    publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics[: 5 if ground_truth else 4]]
+    try:
+        assert spin_until(probe, lambda: all(p.get_subscription_count() > 0 for p in publishers), 30.0)
+
+        def send(msgs, gap_s=0.0):
+            for p, m in zip(publishers, msgs, strict=True):
+                p.publish(m)
+                rclpy.spin_once(probe, timeout_sec=gap_s)
+
+        labels = gt if ground_truth else None
+        bad = frame_messages(1.0, rgb, depth, K, labels)
+        bad[0] = numpy_to_image(rgb[:-4], "rgb8", bad[0].header)  # rgb smaller than depth
+        send(bad, 0.05)
+        odd = frame_messages(2.0, rgb, depth, K, labels)
+        odd[1].encoding = "64FC1"  # unknown depth encoding
+        send(odd, 0.05)
+        unsynced = frame_messages(3.0, rgb, depth, K, labels)
+        unsynced[3].header.stamp.sec = 9  # pose 6 s away from the images: never matched
+        send(unsynced, 0.05)
+        spin_until(probe, lambda: False, 1.0)
+        assert got["frames"] == [] and got["overlay"] == []
+
+        send(frame_messages(10.0, rgb, depth, K, labels), 0.05)
+        assert spin_until(probe, lambda: len(got["frames"]) == 1 and len(got["overlay"]) == 1, 30.0)
+        frame = got["frames"][0]
+        assert frame.header.stamp.sec == 10 and frame.world_frame_id == "world"
+        predicted = image_to_numpy(frame.labels)
+        if ground_truth:
+            assert np.array_equal(predicted, gt)
+        else:
+            assert segmentation_metrics(predicted, gt)["overlap_f"] > 0.9
+        assert spin_until(probe, lambda: any(
+            {kv.key: kv.value for kv in s.values}.get("frames_rejected") == "2"
+            for d in got["diag"] for s in d.status if "segmentation_node" in s.name), 5.0)
+    finally:
+        code, output = stop(node)
+    assert code == 0, output
+    assert "rejected" in output
