@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from torch import nn
 
-ARCHITECTURE = "unet3d-v1"
+ARCHITECTURE = "unet3d-v2"
 # variant -> number of input channels (F1 only for the baseline; F1..F4 for ARM and its ablations)
 VARIANTS = {"baseline": 1, "arm-c-s": 4, "arm-c": 4, "arm": 4}
 # inference method -> (network variant, post-processing of the predicted probabilities)
@@ -42,20 +42,23 @@ def _conv(in_channels: int, out_channels: int, stride: int = 1) -> nn.Sequential
 
 
 class UNet3D(nn.Module):
-    """Encoder d -> d/2 -> d/4 -> d/8 (c, 2c, 4c, 4c channels), decoder with additive skips."""
+    """Encoder d -> d/2 -> d/4 -> d/8 with c, c, 2c, 4c channels; decoder with additive skips.
+
+    About 0.7 GMAC per object at d = 32, c = 32. The earlier c, 2c, 4c, 4c plan (unet3d-v1) needs
+    2.7x the multiply-adds and measured 75 vs 44 CPU-ms per object on the 2-core development machine."""
 
     def __init__(self, in_channels: int, base_channels: int = 32):
         super().__init__()
         c = base_channels
         self.enc1 = _conv(in_channels, c)
-        self.enc2 = nn.Sequential(_conv(c, 2 * c, 2), _conv(2 * c, 2 * c))
-        self.enc3 = nn.Sequential(_conv(2 * c, 4 * c, 2), _conv(4 * c, 4 * c))
-        self.bottleneck = nn.Sequential(_conv(4 * c, 4 * c, 2), _conv(4 * c, 4 * c))
-        self.up3 = nn.ConvTranspose3d(4 * c, 4 * c, 2, 2)
-        self.dec3 = _conv(4 * c, 4 * c)
-        self.up2 = nn.ConvTranspose3d(4 * c, 2 * c, 2, 2)
-        self.dec2 = _conv(2 * c, 2 * c)
-        self.up1 = nn.ConvTranspose3d(2 * c, c, 2, 2)
+        self.enc2 = nn.Sequential(_conv(c, c, 2), _conv(c, c))
+        self.enc3 = nn.Sequential(_conv(c, 2 * c, 2), _conv(2 * c, 2 * c))
+        self.bottleneck = nn.Sequential(_conv(2 * c, 4 * c, 2), _conv(4 * c, 4 * c))
+        self.up3 = nn.ConvTranspose3d(4 * c, 2 * c, 2, 2)
+        self.dec3 = _conv(2 * c, 2 * c)
+        self.up2 = nn.ConvTranspose3d(2 * c, c, 2, 2)
+        self.dec2 = _conv(c, c)
+        self.up1 = nn.ConvTranspose3d(c, c, 2, 2)
         self.head = nn.Conv3d(c, 1, 3, 1, 1)
         nn.init.constant_(self.head.bias, float(np.log(OCCUPIED_PRIOR / (1 - OCCUPIED_PRIOR))))
 

@@ -21,7 +21,7 @@ def test_every_variant_maps_grids_to_logits(variant):
     logits = model(grids)
     assert logits.shape == (2, 16, 16, 16)
     assert model_config(model) == {
-        "architecture": "unet3d-v1",
+        "architecture": "unet3d-v2",
         "variant": variant,
         "in_channels": VARIANTS[variant],
         "resolution": 16,
