@@ -5,8 +5,9 @@ paper's benchmark, depth noise on) are rendered at 640x480 and segmented by the 
 by the classic baseline (RANSAC plane + DBSCAN). Both are scored with the UOIS metrics (overlap and
 boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12 objects), and timed per frame.
 
-Rendered frames and per-scene scores are kept under OUT/, so an interrupted run resumes where it
-stopped. Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
+Rendered frames and per-scene scores are kept under OUT/cache/, so an interrupted run resumes where
+it stopped; scores are keyed by a hash of this package's source, so a changed method is scored anew.
+Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
 """
 
 import argparse
@@ -52,6 +53,14 @@ def config_key(args) -> str:
     objects = str(pathlib.Path(args.objects).resolve()) if args.objects else "heldout"
     text = json.dumps([args.seed, objects, args.min_objects, args.max_objects, not args.no_noise])
     return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+
+def code_key() -> str:
+    """Hash of the package's source files: cached scores are only reused for identical code."""
+    digest = hashlib.sha1()
+    for path in sorted(pathlib.Path(__file__).parent.glob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 def render_scene(index: int, args, pool):
@@ -197,9 +206,9 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     out = pathlib.Path(args.out)
     key = config_key(args)
-    frames_dir = out / "frames" / key
+    frames_dir = out / "cache" / key
     frames_dir.mkdir(parents=True, exist_ok=True)
-    scores_path = out / f"scores_{key}.jsonl"
+    scores_path = frames_dir / f"scores_{code_key()}.jsonl"
     done = {}
     if scores_path.exists():
         for line in scores_path.read_text().splitlines():
