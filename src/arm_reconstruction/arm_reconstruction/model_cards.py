@@ -43,7 +43,8 @@ def model_card(checkpoint_path, note: str = "") -> str:
         "| --- | --- |",
         f"| file | `{pathlib.Path(checkpoint_path).name}` ({pathlib.Path(checkpoint_path).stat().st_size / 1e6:.1f} MB) |",
         f"| network | {config['architecture']}, {config['in_channels']} input channels, "
-        f"{config['resolution']}^3 grid, {config['base_channels']} base channels |",
+        f"{config['resolution']}^3 grid, {config['base_channels']} base channels, weights stored as "
+        f"{extra.get('weights_dtype', 'float32')} |",
         f"| training data | {extra.get('train_samples', '?')} samples from {extra.get('train_shards', '?')} "
         f"shards of split `{training.get('train_split', '?')}` (training categories) in `{training.get('data', '?')}`"
         f"{_seed_text(extra.get('train_seeds'))} |",

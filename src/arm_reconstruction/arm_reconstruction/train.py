@@ -68,6 +68,7 @@ class TrainConfig:
     eval_every: int = 1000
     eval_samples: int = 512
     time_limit_min: float = 0.0
+    save_float16: bool = True
 
     def __post_init__(self):
         if self.variant not in PRIORS:
@@ -344,10 +345,14 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
         "heldout_metrics": metrics,
         "command": command,
     }
+    if config.save_float16:
+        model.half()  # half the file size; load_checkpoint copies the weights into a float32 model
     save_checkpoint(
         config.out, model, config={"training": dataclasses.asdict(config)},
-        extra={**result, "evaluations": evaluations, "loss_history": _thin(history, 400)},
+        extra={**result, "weights_dtype": "float16" if config.save_float16 else "float32",
+               "evaluations": evaluations, "loss_history": _thin(history, 400)},
     )
+    model.float()
     (work_dir / "result.json").write_text(json.dumps(result, indent=1))
     if world > 1:
         torch.distributed.destroy_process_group()
@@ -427,6 +432,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
     parser.add_argument("--eval-samples", type=int, default=defaults.eval_samples)
+    parser.add_argument("--save-float32", action="store_true", help="store float32 weights (default float16)")
     parser.add_argument("--time-limit-min", type=float, default=defaults.time_limit_min,
                         help="stop after this many minutes of this session and finish (0: no limit)")
     return parser
@@ -436,6 +442,7 @@ def config_from_args(args) -> TrainConfig:
     values = {field.name: getattr(args, field.name) for field in dataclasses.fields(TrainConfig)
               if hasattr(args, field.name)}
     values["augment"] = not args.no_augment
+    values["save_float16"] = not args.save_float32
     return TrainConfig(**values)
 
 

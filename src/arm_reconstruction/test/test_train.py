@@ -41,7 +41,9 @@ def test_train_writes_a_loadable_checkpoint_card_and_curves(box_data, tmp_path):
     assert set(result["heldout_metrics"]) >= {"iou", "chamfer_m", "stable", "single_component"}
     model, config = load_checkpoint(tmp_path / "arm.pt", expected_variant="arm", expected_resolution=16)
     assert config["training"]["stability_weight"] == TrainConfig().stability_weight
-    assert config["extra"]["command"] == "train --test"
+    assert config["extra"]["command"] == "train --test" and config["extra"]["weights_dtype"] == "float16"
+    assert next(model.parameters()).dtype == torch.float32
+    assert torch.isfinite(model(torch.zeros(1, 4, 16, 16, 16))).all()
     assert (tmp_path / "curves.png").stat().st_size > 1000
     card = write_model_card(tmp_path / "arm.pt").read_text()
     assert "train --test" in card and "voxel IoU" in card
