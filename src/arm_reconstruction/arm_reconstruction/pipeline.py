@@ -8,6 +8,7 @@ visible-fraction estimate. Usable without ROS.
 
 import pathlib
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,26 @@ from .meshing import (
 from .network import METHODS, canonical_method, predict_occupancy, prepare_for_inference, resolve_device
 
 STAGES = ("grid", "network", "postprocess", "meshing", "intersections", "decomposition", "visibility")
+
+
+class StageTimer:
+    """Wall-clock and process-CPU seconds (all threads) per stage, accumulated until reset()."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        self.wall_s = dict.fromkeys(STAGES, 0.0)
+        self.cpu_s = dict.fromkeys(STAGES, 0.0)
+
+    @contextmanager
+    def __call__(self, stage: str):
+        wall, cpu = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            self.wall_s[stage] += time.perf_counter() - wall
+            self.cpu_s[stage] += time.process_time() - cpu
 
 
 @dataclass
@@ -159,7 +180,17 @@ class Reconstructor:
         if getattr(model, "resolution", self.resolution) != self.resolution:
             raise CheckpointError(f"model resolution {model.resolution} differs from requested {self.resolution}")
         self.decomposer = ConvexDecomposer(self.settings.decomposition)
-        self.last_timings_s: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+        self.timer = StageTimer()
+
+    @property
+    def last_timings_s(self) -> dict[str, float]:
+        """Wall-clock seconds per stage of the last frame."""
+        return self.timer.wall_s
+
+    @property
+    def last_cpu_s(self) -> dict[str, float]:
+        """Process CPU seconds (all threads) per stage of the last frame."""
+        return self.timer.cpu_s
 
     def __call__(self, rgb, depth_m, K, T_world_camera, labels, object_ids=None) -> list[ReconstructedObject]:
         """Objects of one frame, ascending id. Raises GridInputError for a malformed frame (shapes,
@@ -167,30 +198,26 @@ class Reconstructor:
         their error set."""
         if rgb is not None and np.asarray(rgb).shape[:2] != np.asarray(depth_m).shape[:2]:
             raise GridInputError(f"rgb shape {np.asarray(rgb).shape} does not match depth {np.asarray(depth_m).shape}")
-        self.last_timings_s = dict.fromkeys(STAGES, 0.0)
+        self.timer.reset()
         grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
         probabilities = self.predict(grids)
         return self.build_objects(grids, probabilities, labels, K, T_world_camera)
 
     def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
-        start = time.perf_counter()
         s = self.settings
-        grids = frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, s.k, s.table_height_m)
-        self.last_timings_s["grid"] = time.perf_counter() - start
-        return grids
+        with self.timer("grid"):
+            return frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, s.k, s.table_height_m)
 
     def predict(self, grids: FrameGrids) -> np.ndarray:
         """Occupancy probabilities [N, d, d, d] of the frame's grids, after the method's post-processing
         (ray carving: observed-empty voxels cleared; extrusion: columns filled down to the table)."""
-        start = time.perf_counter()
-        probabilities = predict_occupancy(self.model, grids.grids, self.device, self.settings.batch_size)
-        self.last_timings_s["network"] = time.perf_counter() - start
-        start = time.perf_counter()
-        if self.settings.postprocess == "ray_carving":
-            probabilities = np.stack([ray_carve(p, g) for p, g in zip(probabilities, grids.grids, strict=True)])
-        elif self.settings.postprocess == "extrude":
-            probabilities = extrude_to_table(probabilities.transpose(1, 2, 3, 0)).transpose(3, 0, 1, 2)
-        self.last_timings_s["postprocess"] = time.perf_counter() - start
+        with self.timer("network"):
+            probabilities = predict_occupancy(self.model, grids.grids, self.device, self.settings.batch_size)
+        with self.timer("postprocess"):
+            if self.settings.postprocess == "ray_carving":
+                probabilities = np.stack([ray_carve(p, g) for p, g in zip(probabilities, grids.grids, strict=True)])
+            elif self.settings.postprocess == "extrude":
+                probabilities = extrude_to_table(probabilities.transpose(1, 2, 3, 0)).transpose(3, 0, 1, 2)
         return probabilities
 
     def build_objects(
@@ -200,51 +227,35 @@ class Reconstructor:
         probabilities [N, d, d, d] laid out in grids.frames (the stages after the network)."""
         s = self.settings
         labels = np.asarray(labels)
-        start = time.perf_counter()
-        meshes = [
-            occupancy_mesh(p, frame, s.threshold, s.min_component_voxels)
-            for p, frame in zip(probabilities, grids.frames, strict=True)
-        ]
-        self.last_timings_s["meshing"] = time.perf_counter() - start
-
-        start = time.perf_counter()
-        if s.remove_intersections and len(meshes) > 1:
-            meshes, _ = remove_intersections(meshes)
-        self.last_timings_s["intersections"] = time.perf_counter() - start
+        with self.timer("meshing"):
+            meshes = [
+                occupancy_mesh(p, frame, s.threshold, s.min_component_voxels)
+                for p, frame in zip(probabilities, grids.frames, strict=True)
+            ]
+        with self.timer("intersections"):
+            if s.remove_intersections and len(meshes) > 1:
+                meshes, _ = remove_intersections(meshes)
 
         objects = {i: _empty_object(i, s.method, reason) for i, reason in grids.errors.items()}
-        decomposition_s = visibility_s = 0.0
         K = np.asarray(K, dtype=np.float64)
         T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
         for n, (object_id, frame, mesh) in enumerate(zip(grids.object_ids, grids.frames, meshes, strict=True)):
             if len(mesh.faces) == 0:
-                objects[object_id] = _empty_object(
-                    object_id, s.method, f"no voxel above threshold {s.threshold} for object {object_id}", frame
-                )
+                reason = f"no voxel above threshold {s.threshold} for object {object_id}"
+                objects[object_id] = _empty_object(object_id, s.method, reason, frame)
                 continue
             T_world_object = _object_pose(mesh)
             local = mesh.copy().apply_translation(-T_world_object[:3, 3])
-            start = time.perf_counter()
-            parts = self.decomposer(local)
-            decomposition_s += time.perf_counter() - start
-            start = time.perf_counter()
-            visible = (
-                estimate_visible_fraction(mesh, labels, object_id, K, T_world_camera) if s.estimate_visibility else -1.0
-            )
-            visibility_s += time.perf_counter() - start
+            with self.timer("decomposition"):
+                parts = self.decomposer(local)
+            visible = -1.0
+            if s.estimate_visibility:
+                with self.timer("visibility"):
+                    visible = estimate_visible_fraction(mesh, labels, object_id, K, T_world_camera)
+            kept = probabilities[n] if s.keep_probabilities else None
             objects[object_id] = ReconstructedObject(
-                object_id,
-                T_world_object,
-                local,
-                parts,
-                visible,
-                frame,
-                s.method,
-                "",
-                probabilities[n] if s.keep_probabilities else None,
+                object_id, T_world_object, local, parts, visible, frame, s.method, "", kept
             )
-        self.last_timings_s["decomposition"] = decomposition_s
-        self.last_timings_s["visibility"] = visibility_s
         return [objects[i] for i in sorted(objects)]
 
 
