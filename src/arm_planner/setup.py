@@ -20,6 +20,7 @@ setup(
     entry_points={
         "console_scripts": [
             "plan_node = arm_planner.plan_node:main",
-            "bench_manip = arm_planner.bench_manip:main",        ],
+            "bench_manip = arm_planner.bench_manip:main",
+        ],
     },
 )

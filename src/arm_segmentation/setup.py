@@ -20,6 +20,7 @@ setup(
     entry_points={
         "console_scripts": [
             "segmentation_node = arm_segmentation.segmentation_node:main",
-            "bench_seg = arm_segmentation.bench_seg:main",        ],
+            "bench_seg = arm_segmentation.bench_seg:main",
+        ],
     },
 )

@@ -20,6 +20,7 @@ setup(
     entry_points={
         "console_scripts": [
             "sim_node = arm_sim.sim_node:main",
-            "bench_perf = arm_sim.bench_perf:main",        ],
+            "bench_perf = arm_sim.bench_perf:main",
+        ],
     },
 )
