@@ -16,15 +16,15 @@ torch.set_num_threads(2)
 
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
 def test_every_variant_maps_grids_to_logits(variant):
-    model = build_model(variant, resolution=16, base_channels=32)
-    grids = torch.rand(2, VARIANTS[variant], 16, 16, 16)
+    model = build_model(variant, resolution=8, base_channels=32)
+    grids = torch.rand(2, VARIANTS[variant], 8, 8, 8)
     logits = model(grids)
-    assert logits.shape == (2, 16, 16, 16)
+    assert logits.shape == (2, 8, 8, 8)
     assert model_config(model) == {
         "architecture": "unet3d-v2",
         "variant": variant,
         "in_channels": VARIANTS[variant],
-        "resolution": 16,
+        "resolution": 8,
         "base_channels": 32,
     }
     logits.sum().backward()
