@@ -81,7 +81,7 @@ def estimate_support_levels(
     n_bins = max(int(np.ceil((hi - lo) / params.histogram_bin_m)) + 1, 1)
     hist = np.bincount(((z - lo) / params.histogram_bin_m).astype(np.int64), weights=w, minlength=n_bins)
     half = max(int(round(params.band_m / params.histogram_bin_m)), 1)
-    window = np.convolve(hist, np.ones(2 * half + 1), mode="same")
+    window = np.convolve(hist, np.ones(2 * half + 1))[half : half + n_bins]
     levels: list[SupportLevel] = []
     taken = np.zeros(n_bins, dtype=bool)
     for peak in np.argsort(window)[::-1]:

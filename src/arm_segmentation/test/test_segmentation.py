@@ -64,6 +64,17 @@ def test_empty_table_gives_no_instances():
     assert labels.max() == 0
 
 
+def test_perfectly_flat_table_seen_from_above():
+    camera = look_at((0.0, 0.0, 0.8), (0.0, 0.0, 0.0), up=(1.0, 0.0, 0.0))
+    rgb, depth, gt, K = render([Box((0.0, 0.0, 0.03), (0.03, 0.03, 0.03))], camera)
+    for stride in (1, 2):
+        result = segment_detailed(rgb, depth, K, camera, SegmentationParams(working_stride=stride))
+        assert len(result.levels) == 1 and abs(result.levels[0].height_m) < 2e-3
+        assert segmentation_metrics(result.labels, gt)["overlap_f"] > 0.9
+    rgb, depth, gt, K = render([], camera)
+    assert segment(rgb, depth, K, camera).max() == 0
+
+
 def test_bad_depth_values_do_not_crash():
     rgb, depth, gt, K = render(touching_and_stacked(), CAMERA)
     bad = depth.copy()
@@ -113,3 +124,22 @@ def test_forty_objects():
     rgb, depth, gt, K = render(boxes, camera)
     m = segmentation_metrics(segment(rgb, add_noise(depth, rng), K, camera), gt)
     assert m["n_gt"] == 40 and m["n_pred"] >= 36 and m["overlap_f"] > 0.85
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_frames_never_crash(seed):
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(8, 120, 2)
+    rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    depth = rng.uniform(0, 3, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.3] = 0
+    if seed % 2:
+        depth = np.round(depth, 1)  # large flat patches at a few heights
+    eye = rng.normal(size=3)
+    eye[2] = abs(eye[2]) + 0.2
+    camera = look_at(eye, rng.normal(size=3) * 0.1)
+    K = np.array([[w, 0, w / 2], [0, w, h / 2], [0, 0, 1.0]])
+    for stride in (1, 2, 3):
+        labels = segment(rgb, depth, K, camera, SegmentationParams(working_stride=stride))
+        assert labels.shape == (h, w) and labels.dtype == np.uint16
+    assert segment_baseline(rgb, depth, K, camera).shape == (h, w)
