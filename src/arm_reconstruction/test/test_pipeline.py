@@ -130,3 +130,33 @@ def test_one_call_api(sim, checkpoints):
     _, frame = sim
     objects = reconstruct(*args(frame), method="arm", checkpoint_path=str(checkpoints / "arm.pt"), threshold=0.5)
     assert len(objects) == len([i for i in np.unique(frame.labels) if i > 0])
+
+
+@pytest.mark.slow
+def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path):
+    from test_dataset import write_box_dataset
+
+    from arm_reconstruction.train import TrainConfig, train
+
+    write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0)
+    write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1)
+    config = TrainConfig(
+        variant="arm",
+        data=str(tmp_path),
+        out=str(tmp_path / "arm.pt"),
+        steps=2,
+        batch_size=4,
+        base_channels=8,
+        device="cpu",
+        checkpoint_every=1,
+        eval_every=2,
+        eval_samples=4,
+    )
+    train(config, progress=False)
+    _, frame = sim
+    reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt")))
+    assert reconstructor.resolution == 16 and reconstructor.checkpoint_config["base_channels"] == 8
+    objects = reconstructor(*args(frame))
+    assert [o.id for o in objects] == sorted(int(i) for i in np.unique(frame.labels) if i > 0)
+    assert all(o.grid.resolution == 16 for o in objects)
+    assert all(o.ok or o.error for o in objects)
