@@ -51,8 +51,13 @@ def get_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
 
 def free_body_trees(model: mujoco.MjModel) -> np.ndarray:
     """Kinematic trees rooted at a free joint (the objects)."""
-    roots = [b for b in range(1, model.nbody) if model.body_parentid[b] == 0 and model.body_jntnum[b] > 0
-             and model.jnt_type[model.body_jntadr[b]] == mujoco.mjtJoint.mjJNT_FREE]
+    roots = [
+        b
+        for b in range(1, model.nbody)
+        if model.body_parentid[b] == 0
+        and model.body_jntnum[b] > 0
+        and model.jnt_type[model.body_jntadr[b]] == mujoco.mjtJoint.mjJNT_FREE
+    ]
     return np.unique(model.body_treeid[roots]).astype(int)
 
 
@@ -78,9 +83,7 @@ class BatchedRollout:
         self.model = model
         substeps = control_dt_s / model.opt.timestep
         if abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
-            raise ValueError(
-                f"control step {control_dt_s} s is not a multiple of timestep {model.opt.timestep}"
-            )
+            raise ValueError(f"control step {control_dt_s} s is not a multiple of timestep {model.opt.timestep}")
         self.substeps = int(round(substeps))
         self.nthread = max(0, int(nthread))
         self._runner = mujoco.rollout.Rollout(nthread=self.nthread)
@@ -225,8 +228,9 @@ class Mppi:
         `fixed_controls`: actuator index -> target forced over the whole horizon (e.g. the gripper).
         """
         cfg = self.config
-        rates = np.clip(self.nominal[None] + self.sample_noise(noise_basis), -self.limits.max_rate,
-                        self.limits.max_rate)
+        rates = np.clip(
+            self.nominal[None] + self.sample_noise(noise_basis), -self.limits.max_rate, self.limits.max_rate
+        )
         previous = np.asarray(previous_control, dtype=np.float64)
         fixed = fixed_controls or {}
         for a in fixed:

@@ -81,15 +81,21 @@ class PlanNode(Node):
         self.last_plan_s = float("nan")
 
         inputs = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(ReconstructedObjectArray, "arm/meshes", self.on_meshes, latched_qos(),
-                                 callback_group=inputs)
+        self.create_subscription(
+            ReconstructedObjectArray, "arm/meshes", self.on_meshes, latched_qos(), callback_group=inputs
+        )
         self.create_subscription(JointState, "joint_states", self.on_joint_states, 1, callback_group=inputs)
         self.pub_trajectory = self.create_publisher(JointTrajectory, "arm/joint_trajectory", 1)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_timer(1.0, self.publish_diagnostics, callback_group=inputs)
         self.action_server = ActionServer(
-            self, Manipulate, "arm/manipulate", execute_callback=self.execute, goal_callback=self.on_goal,
-            cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=ReentrantCallbackGroup(),
+            self,
+            Manipulate,
+            "arm/manipulate",
+            execute_callback=self.execute,
+            goal_callback=self.on_goal,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup(),
         )
         self.get_logger().info(
             f"plan_node ready: {config.mppi.steps} steps x {config.mppi.num_paths} paths x horizon "
@@ -160,9 +166,16 @@ class PlanNode(Node):
         displacement = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
         started = time.perf_counter()
         outcome = self.session.request(
-            task, int(goal.target_id), displacement, float(goal.tolerance_m), joints[0], joints[1],
-            feedback=on_step, should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
-            start_com_world=start_com, resume_state=resume[0] if resume else None,
+            task,
+            int(goal.target_id),
+            displacement,
+            float(goal.tolerance_m),
+            joints[0],
+            joints[1],
+            feedback=on_step,
+            should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok(),
+            start_com_world=start_com,
+            resume_state=resume[0] if resume else None,
             resume_steps_in_state=resume[1] if resume else 0,
         )
         self.last_plan_s = time.perf_counter() - started
@@ -185,8 +198,9 @@ class PlanNode(Node):
         except Exception as error:  # the node must keep serving whatever happens inside one goal
             self.errors.error("execute", f"goal failed: {type(error).__name__}: {error}")
             goal_handle.abort()
-            return Manipulate.Result(success=False, message=f"internal error: {type(error).__name__}: {error}",
-                                     final_error_m=float("nan"))
+            return Manipulate.Result(
+                success=False, message=f"internal error: {type(error).__name__}: {error}", final_error_m=float("nan")
+            )
         finally:
             with self._lock:
                 self._busy = False
@@ -205,7 +219,9 @@ class PlanNode(Node):
             goal_handle.abort()
             return Manipulate.Result(success=False, message=outcome.message, final_error_m=float("nan"))
         result = Manipulate.Result(
-            success=bool(outcome.success), message=outcome.message, final_error_m=float(outcome.final_error_m),
+            success=bool(outcome.success),
+            message=outcome.message,
+            final_error_m=float(outcome.final_error_m),
             trajectory=trajectory,
         )
         if goal_handle.is_cancel_requested:
@@ -246,9 +262,14 @@ class PlanNode(Node):
             objects = len(self._objects[0]) if self._objects else 0
             busy = self._busy
         values = {
-            "goals": self.goals, "refusals": self.refusals, "busy": busy, "twin_objects": objects,
-            "twin_builds": self.session.twin_builds, "meshes_received": self.meshes_received,
-            "meshes_rejected": self.meshes_rejected, "last_mppi_step_ms": self.last_step_ms,
+            "goals": self.goals,
+            "refusals": self.refusals,
+            "busy": busy,
+            "twin_objects": objects,
+            "twin_builds": self.session.twin_builds,
+            "meshes_received": self.meshes_received,
+            "meshes_rejected": self.meshes_rejected,
+            "last_mppi_step_ms": self.last_step_ms,
             "last_plan_s": self.last_plan_s,
         }
         level = DiagnosticStatus.OK if objects else DiagnosticStatus.WARN

@@ -152,9 +152,9 @@ class Planner:
         mujoco.mj_comPos(self.model, data)
         jacp = np.zeros((3, self.model.nv))
         jacr = np.zeros((3, self.model.nv))
-        tcp_world = data.xpos[self.robot.tcp_body] + data.xmat[self.robot.tcp_body].reshape(
-            3, 3
-        ) @ np.asarray(self.robot.spec.tcp_offset_m)
+        tcp_world = data.xpos[self.robot.tcp_body] + data.xmat[self.robot.tcp_body].reshape(3, 3) @ np.asarray(
+            self.robot.spec.tcp_offset_m
+        )
         mujoco.mj_jac(self.model, data, jacp, jacr, tcp_world, self.robot.tcp_body)
         jac = np.concatenate([jacp, jacr])[:, self.robot.dof_adr]
         pinv = jac.T @ np.linalg.inv(jac @ jac.T + n.damping**2 * np.eye(6))
@@ -208,9 +208,7 @@ class Planner:
             t0 = time.perf_counter()
             state = get_state(model, data)
             gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
-            result = self.mppi.step(
-                state, ctrl, reward, self.noise_basis(data), {int(robot.gripper_actuator): gripper}
-            )
+            result = self.mppi.step(state, ctrl, reward, self.noise_basis(data), {int(robot.gripper_actuator): gripper})
             step_ms.append(1e3 * (time.perf_counter() - t0))
             self._last_ret, self._last_w = result.returns, result.weights
             for target in self.mppi.rollout.substep_controls(ctrl, result.control[None, None])[0]:

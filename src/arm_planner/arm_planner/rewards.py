@@ -193,9 +193,7 @@ class GraspReward(TaskReward):
         self.step_count += 1
         if self.state == "ungrasped":
             n = self.step_count
-            decreasing = n > self.stall_window and (
-                self._history[-1 - self.stall_window] - distance > self.stall_eps_m
-            )
+            decreasing = n > self.stall_window and (self._history[-1 - self.stall_window] - distance > self.stall_eps_m)
             still_ungrasped = n < self.settle_steps or (distance > self.close_distance_m and decreasing)
             if not still_ungrasped and distance <= self.max_close_distance_m:
                 self.state = "grasping"

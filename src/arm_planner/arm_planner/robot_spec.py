@@ -46,9 +46,7 @@ class ResolvedRobot:
             for a in range(model.nu)
             if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
         }
-        missing = [
-            n for n, j in zip(spec.arm_joints, self.joint_ids, strict=True) if int(j) not in actuator_by_joint
-        ]
+        missing = [n for n, j in zip(spec.arm_joints, self.joint_ids, strict=True) if int(j) not in actuator_by_joint]
         if missing:
             raise ValueError(f"arm joints without a position actuator: {missing}")
         self.arm_actuators = np.array([actuator_by_joint[int(j)] for j in self.joint_ids])

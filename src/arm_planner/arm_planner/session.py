@@ -17,8 +17,10 @@ from arm_planner.rewards import TASK_GRASP, TASKS
 from arm_planner.robot_spec import RobotSpec
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, panda_robot_spec
 
-# Panda: shoulder 0.333 m above the base; the TCP reaches ~0.855 m + 0.1 m from it. Keep a margin.
+# Panda: shoulder (joint 2) 0.333 m above the base; shoulder -> wrist (joint 6) at most ~0.80 m
+# (0.316 + sqrt(0.384^2 + 0.0825^2) + 0.088). A top-down grasp puts the wrist ~0.21 m above the TCP.
 SHOULDER_HEIGHT_M = 0.333
+WRIST_ABOVE_TCP_M = 0.21
 REACH_M = 0.80
 
 
@@ -85,9 +87,12 @@ class ManipulationSession:
 
     def _reach_problem(self, point: np.ndarray) -> str | None:
         shoulder = np.array([*self.robot_base_xy, self.table_height_m + SHOULDER_HEIGHT_M])
-        distance = float(np.linalg.norm(point - shoulder))
+        distance = float(np.linalg.norm(point + np.array([0.0, 0.0, WRIST_ABOVE_TCP_M]) - shoulder))
         if distance > REACH_M:
-            return f"{np.round(point, 3).tolist()} is {distance:.2f} m from the shoulder (reach {REACH_M:.2f} m)"
+            return (
+                f"{np.round(point, 3).tolist()} needs the wrist {distance:.2f} m from the shoulder "
+                f"(reach {REACH_M:.2f} m)"
+            )
         if point[2] < self.table_height_m - 0.01:
             return f"{np.round(point, 3).tolist()} is below the table"
         return None
@@ -143,8 +148,13 @@ class ManipulationSession:
             if problem:
                 return Outcome(False, f"{what} out of reach: {problem}", skipped=dict(twin.skipped))
         plan_request = PlanRequest(
-            task, twin.body_name(target_id), displacement, tolerance_m or DEFAULT_TOLERANCE_M,
-            start_com_world=start_com_world, resume_state=resume_state, resume_steps_in_state=resume_steps_in_state,
+            task,
+            twin.body_name(target_id),
+            displacement,
+            tolerance_m or DEFAULT_TOLERANCE_M,
+            start_com_world=start_com_world,
+            resume_state=resume_state,
+            resume_steps_in_state=resume_steps_in_state,
         )
         try:
             state = twin.initial_state(arm_q, float(gripper_opening_m), poses)

@@ -104,8 +104,11 @@ def usable_parts(obj: TwinObject, decompose: bool = True) -> list[trimesh.Trimes
         try:
             from arm_sim.objects import decompose_cached
 
-            parts = [h for h in (_valid_hull(p.vertices) for p in decompose_cached(obj.mesh, MAX_DECOMPOSITION_PARTS))
-                     if h is not None]
+            parts = [
+                h
+                for h in (_valid_hull(p.vertices) for p in decompose_cached(obj.mesh, MAX_DECOMPOSITION_PARTS))
+                if h is not None
+            ]
         except Exception:
             parts = []
     if not parts:

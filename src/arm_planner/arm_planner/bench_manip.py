@@ -1,0 +1,289 @@
+"""bench_manip: the paper's cluttered manipulation benchmark (appendix "Cluttered Manipulation Benchmark").
+
+Each episode is one task scene: a target object at a fixed spot, distractors in front of it until its
+visible fraction falls in the episode's bin, one RGB-D view from the robot side with ground-truth
+instance labels (as in the paper). Every method reconstructs the scene from that view (ground truth
+uses the true meshes), the planner plans the task in a twin of that reconstruction, and the plan is
+executed open loop in the ground-truth world. Success: grasp lifts the target >= 5 cm; push moves it
+30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
+
+Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import pathlib
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+from arm_planner.bench_stats import BINS, bin_label, summarise, write_plots, write_report
+from arm_planner.mppi import STATE_SPEC
+from arm_planner.planner import PlannerConfig
+from arm_planner.rewards import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
+from arm_planner.session import ManipulationSession
+from arm_planner.twin import TwinObject
+
+GOALS = {
+    TASK_GRASP: (0.0, 0.0, 0.0),
+    TASK_PUSH: (0.05, -0.30, 0.0),  # 30 cm right (-y), 5 cm forward (+x)
+    TASK_REARRANGE: (0.20, 0.20, 0.0),  # 20 cm forward, 20 cm left
+}
+TOLERANCE_M = 0.025
+GROUND_TRUTH = "ground_truth"
+DEFAULT_METHODS = (GROUND_TRUTH, "baseline", "baseline+E", "arm")
+HOLD_AFTER_S = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    index: int
+    task: str
+    bin_index: int
+    seed: int
+
+
+def plan_episodes(n: int, tasks, bins, seed: int) -> list[Episode]:
+    """n episodes cycling over tasks x bins (each combination before any repeats)."""
+    combos = [(t, b) for b in range(len(bins)) for t in tasks]
+    return [Episode(i, *combos[i % len(combos)], seed * 100_003 + i) for i in range(n)]
+
+
+def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 6):
+    """(scene, target index, frame) for the episode, or raises RuntimeError when the bin is unreachable."""
+    from arm_sim.depth_noise import DepthNoise
+    from arm_sim.scenes import task_scene
+    from arm_sim.world import SimWorld
+
+    lo, hi = bins[episode.bin_index]
+    last = None
+    for attempt in range(tries):
+        rng = np.random.default_rng([episode.seed, attempt])
+        target = target_pool.sample(rng)
+        try:
+            scene, target_index, camera = task_scene(
+                target, distractor_pool, rng, visible_range=(lo, hi), target_scale=target_scale
+            )
+        except RuntimeError as error:
+            last = error
+            continue
+        world = SimWorld(scene, robot_arm=True)
+        frame = world.render(camera, noise=DepthNoise(), rng=rng)
+        world.close()
+        visible = float(frame.visible_fraction[target_index])
+        if lo <= visible < hi:
+            return scene, target_index, frame, target.name
+        last = RuntimeError(f"visible fraction {visible:.2f} left [{lo}, {hi}) after settling")
+    raise RuntimeError(f"no scene for bin {bin_label(bins[episode.bin_index])}: {last}")
+
+
+def ground_truth_objects(scene) -> list[TwinObject]:
+    objects = []
+    for i, placed in enumerate(scene.objects):
+        model = placed.model.scaled(placed.scale)
+        objects.append(TwinObject(i + 1, placed.T_world_object, model.mesh, model.convex_parts, 1.0, GROUND_TRUTH))
+    return objects
+
+
+def reconstructed_objects(method: str, frame) -> list[TwinObject]:
+    from arm_reconstruction.pipeline import reconstruct
+
+    objects = reconstruct(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, method=method)
+    return [
+        TwinObject(o.id, o.T_world_object, o.mesh, o.convex_parts, o.visible_fraction, o.method)
+        for o in objects
+        if o.ok
+    ]
+
+
+def target_stability_m(session: ManipulationSession, target_id: int, seconds: float = 1.0) -> float:
+    """How far the target's centre moves when its twin (robot still at home) settles: 0 = stable."""
+    import mujoco
+
+    from arm_sim import robot
+
+    twin = session.twin
+    if twin is None or target_id not in twin:
+        return float("nan")
+    model = twin.model
+    flags = model.opt.enableflags
+    model.opt.enableflags = flags & ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    data = mujoco.MjData(model)
+    mujoco.mj_setState(model, data, twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M), STATE_SPEC)
+    mujoco.mj_forward(model, data)
+    body = model.body(twin.body_name(target_id)).id
+    start = data.xipos[body].copy()
+    mujoco.mj_step(model, data, nstep=int(round(seconds / model.opt.timestep)))
+    mujoco.mj_forward(model, data)
+    model.opt.enableflags = flags
+    return float(np.linalg.norm(data.xipos[body] - start))
+
+
+def execute_in_world(scene, target_index: int, task: str, outcome) -> tuple[bool, float]:
+    """Run the plan open loop in the ground-truth world -> (success, error m)."""
+    from arm_sim.world import SimWorld
+
+    world = SimWorld(scene, robot_arm=True)
+    body = world.object_ids[target_index]
+    start = world.data.xipos[body].copy()
+    result = outcome.result
+    world.execute(result.times_s, result.joint_positions)
+    world.execute(np.array([HOLD_AFTER_S]), result.joint_positions[-1:])
+    end = world.data.xipos[body].copy()
+    world.close()
+    if task == TASK_GRASP:
+        lift = float(end[2] - start[2])
+        return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
+    error = float(np.linalg.norm(end - (start + np.asarray(GOALS[task]))))
+    return error <= TOLERANCE_M, error
+
+
+def run_method(method, scene, target_index, frame, task, config, twin_timestep_s) -> dict:
+    started = time.perf_counter()
+    row = {"method": method}
+    try:
+        objects = ground_truth_objects(scene) if method == GROUND_TRUTH else reconstructed_objects(method, frame)
+    except Exception as error:  # a missing checkpoint makes the method unavailable; other errors fail it
+        if type(error).__name__ in ("CheckpointError", "FileNotFoundError", "ImportError", "ModuleNotFoundError"):
+            return row | {"success": False, "unavailable": f"{type(error).__name__}: {error}"}
+        return row | {"success": False, "failure": f"reconstruction failed: {type(error).__name__}: {error}"}
+    row["reconstruct_s"] = time.perf_counter() - started
+    from arm_sim import robot
+
+    session = ManipulationSession(config, twin_timestep_s)
+    session.set_objects(objects, scene.table_height_m)
+    target_id = target_index + 1
+    outcome = session.request(task, target_id, GOALS[task], TOLERANCE_M, robot.HOME_Q, robot.GRIPPER_OPEN_M)
+    row.update(
+        predicted_success=bool(outcome.success),
+        predicted_error_m=outcome.final_error_m,
+        plan_message=outcome.message,
+        twin_objects=outcome.twin_objects,
+    )
+    if outcome.result is not None and len(outcome.result.step_ms):
+        row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
+        row["plan_steps"] = len(outcome.result.times_s)
+    if session.twin is not None:
+        row["target_stability_m"] = target_stability_m(session, target_id)
+    session.close()
+    if not outcome.planned:
+        return row | {"success": False, "failure": outcome.message, "seconds": time.perf_counter() - started}
+    success, error = execute_in_world(scene, target_index, task, outcome)
+    return row | {"success": bool(success), "error_m": error, "seconds": time.perf_counter() - started}
+
+
+def load_done(path: pathlib.Path) -> dict:
+    done = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                done[(row["episode"], row["method"])] = row
+    return done
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, default=33, help="scenes (each planned by every method)")
+    parser.add_argument(
+        "--full",
+        action="store_true",
+        help="paper size: 3 scenes per target x task x visibility bin (2574 with 26 targets)",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="results/manip")
+    parser.add_argument("--objects", default=None, help="folder of target meshes (.obj/.stl/.ply, metres)")
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
+    parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
+    parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
+    parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
+    parser.add_argument("--nthread", type=int, default=2)
+    parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
+    args = parser.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(2)
+    from arm_sim.objects import object_pool
+
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "episodes.jsonl"
+    if args.fresh and log.exists():
+        log.unlink()
+    target_pool = object_pool(args.objects, split="heldout", seed=args.seed)
+    distractor_pool = object_pool(None, split="heldout", seed=args.seed + 1)
+    n = args.episodes
+    if args.full:
+        n = 3 * max(len(target_pool), 26 if args.objects is None else len(target_pool)) * len(args.tasks) * len(BINS)
+    episodes = plan_episodes(n, args.tasks, BINS, args.seed)
+    config = PlannerConfig()
+    config.mppi.steps = args.steps
+    config.mppi.nthread = args.nthread
+    config.close_steps = args.close_steps
+    done = load_done(log)
+    settings = {
+        "episodes": n,
+        "seed": args.seed,
+        "methods": args.methods,
+        "tasks": args.tasks,
+        "target_scale": args.target_scale,
+        "steps": args.steps,
+        "close_steps": args.close_steps,
+        "twin_timestep_s": args.twin_timestep,
+        "objects": args.objects or "procedural heldout categories",
+    }
+    progress = tqdm(
+        total=n * len(args.methods),
+        desc="bench_manip",
+        initial=sum(1 for e in episodes for m in args.methods if (e.index, m) in done),
+    )
+    with log.open("a") as sink:
+        for episode in episodes:
+            todo = [m for m in args.methods if (episode.index, m) not in done]
+            if not todo:
+                continue
+            base = {"episode": episode.index, "task": episode.task, "bin": bin_label(BINS[episode.bin_index])}
+            try:
+                scene, target_index, frame, target_name = build_scene(
+                    episode, BINS, target_pool, distractor_pool, args.target_scale
+                )
+                base |= {
+                    "target": target_name,
+                    "visible_fraction": float(frame.visible_fraction[target_index]),
+                    "objects": len(scene.objects),
+                }
+            except RuntimeError as error:
+                for method in todo:
+                    row = base | {"method": method, "skipped": str(error), "success": False}
+                    sink.write(json.dumps(row) + "\n")
+                    done[(episode.index, method)] = row
+                    progress.update(1)
+                continue
+            for method in todo:
+                row = base | run_method(method, scene, target_index, frame, episode.task, config, args.twin_timestep)
+                sink.write(json.dumps(row) + "\n")
+                sink.flush()
+                done[(episode.index, method)] = row
+                progress.update(1)
+                progress.set_postfix(method=method, task=episode.task, ok=row["success"])
+    progress.close()
+    rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
+    summary = summarise(rows, args.methods, args.tasks, BINS, n)
+    summary["settings"] = settings
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_plots(rows, summary, args.methods, BINS, out)
+    write_report(summary, out)
+    print(json.dumps({m: round(v["success"], 3) for m, v in summary["methods"].items()}))
+    print(f"[bench_manip] wrote {out / 'summary.json'}, {out / 'report.md'} and plots")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,202 @@
+"""Success rates with 90% Wilson intervals, plots and the report of bench_manip."""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+
+# The paper's eleven visibility levels: [0, 0.1), ..., [0.9, 1.0) and unoccluded (1.0).
+BINS = tuple((round(0.1 * i, 1), round(0.1 * (i + 1), 1)) for i in range(10)) + ((0.995, 1.01),)
+STABILITY_BINS_M = (0.0, 0.005, 0.02, 0.05, float("inf"))
+Z_90 = 1.6448536269514722
+
+
+def bin_label(bounds) -> str:
+    lo, hi = bounds
+    return "1.0" if lo >= 0.99 else f"{lo:.1f}-{hi:.1f}"
+
+
+def wilson(successes: int, n: int, z: float = Z_90) -> tuple[float, float, float]:
+    """(rate, low, high) with the Wilson score interval; nan for n = 0."""
+    if n == 0:
+        return float("nan"), float("nan"), float("nan")
+    p = successes / n
+    denominator = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denominator
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
+    return p, max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _rate(rows) -> dict:
+    n = len(rows)
+    k = sum(bool(r["success"]) for r in rows)
+    rate, low, high = wilson(k, n)
+    return {"rate": rate, "ci90": [low, high], "n": n}
+
+
+def _median(values) -> float:
+    return float(np.median(values)) if len(values) else float("nan")
+
+
+def counted(rows) -> list[dict]:
+    """Rows that count: a scene existed and the method could run."""
+    return [r for r in rows if "skipped" not in r and "unavailable" not in r]
+
+
+def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
+    summary = {"methods": {}, "episodes": episodes, "confidence": 0.9}
+    for method in methods:
+        mine = [r for r in rows if r["method"] == method]
+        unavailable = sorted({r["unavailable"] for r in mine if "unavailable" in r})
+        mine = counted(mine)
+        overall = _rate(mine)
+        by_task = {t: _rate([r for r in mine if r["task"] == t]) for t in tasks}
+        by_bin = {bin_label(b): _rate([r for r in mine if r["bin"] == bin_label(b)]) for b in bins}
+        summary["methods"][method] = {
+            "success": overall["rate"],
+            "success_ci90": overall["ci90"],
+            "n": overall["n"],
+            "by_task": {t: v["rate"] for t, v in by_task.items()},
+            "by_task_ci90": {t: v["ci90"] for t, v in by_task.items()},
+            "by_task_n": {t: v["n"] for t, v in by_task.items()},
+            "by_visibility": {b: v["rate"] for b, v in by_bin.items()},
+            "by_visibility_ci90": {b: v["ci90"] for b, v in by_bin.items()},
+            "by_visibility_n": {b: v["n"] for b, v in by_bin.items()},
+            "predicted_success": _rate([{"success": r.get("predicted_success", False)} for r in mine])["rate"],
+            "median_mppi_step_ms": _median([r["mppi_step_ms"] for r in mine if "mppi_step_ms" in r]),
+        }
+        if unavailable:
+            summary["methods"][method]["unavailable"] = unavailable
+    summary["targets"] = _targets(summary)
+    return summary
+
+
+def _targets(summary) -> dict:
+    methods = summary["methods"]
+
+    def rate(m):
+        return methods.get(m, {}).get("success", float("nan"))
+
+    checks = {"ground_truth_success": rate("ground_truth")}
+    if "arm" in methods and "baseline" in methods and rate("baseline") > 0:
+        checks["arm_over_baseline"] = rate("arm") / rate("baseline")
+    if "arm" in methods:
+        vis = methods["arm"]["by_visibility"]
+        if vis.get("1.0", 0) and not math.isnan(vis.get("1.0", float("nan"))):
+            checks["arm_vis_0.1-0.2_over_unoccluded"] = vis.get("0.1-0.2", float("nan")) / vis["1.0"]
+    return checks
+
+
+def write_plots(rows, summary, methods, bins, out: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = [bin_label(b) for b in bins]
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    width = 0.8 / max(len(methods), 1)
+    for k, method in enumerate(methods):
+        stats = summary["methods"][method]
+        rates = np.array([stats["by_visibility"][b] for b in labels], dtype=float)
+        ci = np.array([stats["by_visibility_ci90"][b] for b in labels], dtype=float)
+        err = np.abs(np.stack([rates - ci[:, 0], ci[:, 1] - rates]))
+        ax.bar(
+            x + (k - (len(methods) - 1) / 2) * width,
+            np.nan_to_num(rates),
+            width,
+            yerr=np.nan_to_num(err),
+            capsize=2,
+            label=method,
+        )
+    ax.set_xticks(x, labels, rotation=45)
+    ax.set_xlabel("target visible fraction")
+    ax.set_ylabel("success rate (90% CI)")
+    ax.set_ylim(0, 1.05)
+    ax.legend()
+    ax.set_title("Manipulation success vs target visibility")
+    fig.tight_layout()
+    fig.savefig(out / "success_vs_visibility.png", dpi=120)
+    plt.close(fig)
+
+    edges = STABILITY_BINS_M
+    names = [
+        f"<{edges[i + 1] * 100:.1f} cm" if np.isfinite(edges[i + 1]) else f">={edges[i] * 100:.1f} cm"
+        for i in range(len(edges) - 1)
+    ]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for k, method in enumerate(methods):
+        mine = [r for r in counted(rows) if r["method"] == method and np.isfinite(r.get("target_stability_m", np.nan))]
+        rates, errs = [], []
+        for i in range(len(edges) - 1):
+            sel = [r for r in mine if edges[i] <= r["target_stability_m"] < edges[i + 1]]
+            p, lo, hi = wilson(sum(bool(r["success"]) for r in sel), len(sel))
+            rates.append(p)
+            errs.append((p - lo, hi - p))
+        rates = np.array(rates, dtype=float)
+        errs = np.nan_to_num(np.array(errs, dtype=float).T)
+        w = 0.8 / max(len(methods), 1)
+        ax.bar(
+            np.arange(len(names)) + (k - (len(methods) - 1) / 2) * w,
+            np.nan_to_num(rates),
+            w,
+            yerr=errs,
+            capsize=2,
+            label=method,
+        )
+    ax.set_xticks(np.arange(len(names)), names)
+    ax.set_xlabel("target displacement when its reconstruction settles (lower = more stable)")
+    ax.set_ylabel("success rate (90% CI)")
+    ax.set_ylim(0, 1.05)
+    ax.legend()
+    ax.set_title("Manipulation success vs reconstructed target stability")
+    fig.tight_layout()
+    fig.savefig(out / "success_vs_stability.png", dpi=120)
+    plt.close(fig)
+
+
+def _fmt(rate, ci, n) -> str:
+    if n == 0 or rate is None or (isinstance(rate, float) and math.isnan(rate)):
+        return "-"
+    return f"{rate:.2f} [{ci[0]:.2f}, {ci[1]:.2f}] (n={n})"
+
+
+def write_report(summary, out: pathlib.Path) -> None:
+    methods = summary["methods"]
+    settings = summary.get("settings", {})
+    lines = [
+        "# Cluttered manipulation benchmark",
+        "",
+        f"Episodes (scenes): {summary['episodes']}; every method plans on its own reconstruction of the same "
+        "view and the plan runs open loop in the ground-truth world. Rates with 90% Wilson intervals.",
+        "",
+        "Settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()),
+        "",
+        "## Success by method and task",
+        "",
+        "| method | all | " + " | ".join(next(iter(methods.values()))["by_task"]) + " | predicted (twin) |",
+        "|---|---|" + "---|" * len(next(iter(methods.values()))["by_task"]) + "---|",
+    ]
+    for name, m in methods.items():
+        cells = [_fmt(m["success"], m["success_ci90"], m["n"])]
+        cells += [_fmt(m["by_task"][t], m["by_task_ci90"][t], m["by_task_n"][t]) for t in m["by_task"]]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {m['predicted_success']:.2f} |")
+        if "unavailable" in m:
+            lines.append(f"| {name} unavailable: {'; '.join(m['unavailable'])} |")
+    lines += ["", "## Success by target visibility", ""]
+    first = next(iter(methods.values()))
+    lines.append("| visible fraction | " + " | ".join(methods) + " |")
+    lines.append("|---|" + "---|" * len(methods))
+    for b in first["by_visibility"]:
+        cells = [
+            _fmt(m["by_visibility"][b], m["by_visibility_ci90"][b], m["by_visibility_n"][b]) for m in methods.values()
+        ]
+        lines.append(f"| {b} | " + " | ".join(cells) + " |")
+    lines += ["", "## Targets", ""]
+    for key, value in summary["targets"].items():
+        lines.append(f"- {key}: {value:.3f}" if isinstance(value, float) else f"- {key}: {value}")
+    lines += ["", "Plots: success_vs_visibility.png, success_vs_stability.png", ""]
+    (out / "report.md").write_text("\n".join(lines))

@@ -1,0 +1,38 @@
+import math
+
+import pytest
+
+from arm_planner.bench_manip import plan_episodes
+from arm_planner.bench_stats import BINS, bin_label, summarise, wilson
+
+
+def test_wilson_interval():
+    p, lo, hi = wilson(8, 10)
+    assert p == 0.8 and lo == pytest.approx(0.5408, abs=1e-3) and hi == pytest.approx(0.9314, abs=1e-3)
+    assert wilson(0, 5)[1] == 0.0 and math.isnan(wilson(0, 0)[0])
+
+
+def test_bins_match_the_paper():
+    labels = [bin_label(b) for b in BINS]
+    assert len(labels) == 11 and labels[0] == "0.0-0.1" and labels[-2] == "0.9-1.0" and labels[-1] == "1.0"
+
+
+def test_episodes_cycle_tasks_and_bins():
+    episodes = plan_episodes(66, ["grasp", "push", "rearrange"], BINS, 0)
+    combos = {(e.task, e.bin_index) for e in episodes[:33]}
+    assert len(combos) == 33 and len({e.seed for e in episodes}) == 66
+
+
+def test_summary_layout_and_excluded_rows():
+    rows = [
+        {"method": "arm", "task": "grasp", "bin": "1.0", "success": True},
+        {"method": "arm", "task": "push", "bin": "0.1-0.2", "success": False},
+        {"method": "arm", "task": "push", "bin": "0.1-0.2", "success": False, "skipped": "no scene"},
+        {"method": "baseline", "task": "grasp", "bin": "1.0", "success": False, "unavailable": "no checkpoint"},
+    ]
+    summary = summarise(rows, ["arm", "baseline"], ["grasp", "push"], BINS, 3)
+    arm = summary["methods"]["arm"]
+    assert summary["episodes"] == 3 and arm["n"] == 2 and arm["success"] == 0.5
+    assert arm["by_task"] == {"grasp": 1.0, "push": 0.0}
+    assert arm["by_visibility"]["1.0"] == 1.0 and math.isnan(arm["by_visibility"]["0.5-0.6"])
+    assert summary["methods"]["baseline"]["unavailable"] == ["no checkpoint"]

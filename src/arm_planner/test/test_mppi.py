@@ -1,0 +1,117 @@
+import mujoco
+import numpy as np
+from gantry import gantry_model
+
+from arm_planner.mppi import BatchedRollout, ControlLimits, Mppi, MppiConfig, get_state, state_layout
+
+
+def test_integrated_targets_respect_box_and_rate_limits():
+    limits = ControlLimits(np.array([-1.0, 0.0]), np.array([1.0, 0.04]), np.array([2.0, 0.1]))
+    rates = np.random.default_rng(0).normal(scale=10.0, size=(50, 5, 2))
+    targets = limits.integrate(np.array([0.9, 0.0]), rates, 0.02)
+    assert np.all(targets >= limits.low) and np.all(targets <= limits.high)
+    steps = np.abs(np.diff(np.concatenate([np.broadcast_to([0.9, 0.0], (50, 1, 2)), targets], axis=1), axis=1))
+    assert np.all(steps <= limits.max_rate * 0.02 + 1e-12)
+
+
+def test_limits_come_from_actuator_and_joint_ranges():
+    model = gantry_model()
+    limits = ControlLimits.from_model(model, 0.5)
+    np.testing.assert_allclose(limits.low[:3], [-0.5, -0.5, -0.29])
+    np.testing.assert_allclose(limits.high[4], 0.04)
+
+
+def test_noise_is_smooth_and_path_zero_is_the_nominal():
+    model = gantry_model()
+    mppi = Mppi(
+        model,
+        MppiConfig(num_paths=400, horizon=5, noise_smoothing=0.9, nthread=0),
+        ControlLimits.from_model(model, 1.0),
+    )
+    noise = mppi.sample_noise(np.eye(model.nu))
+    assert noise.shape == (400, 5, model.nu)
+    assert np.all(noise[0] == 0)
+    lag1 = np.corrcoef(noise[1:, :-1, 0].ravel(), noise[1:, 1:, 0].ravel())[0, 1]
+    assert 0.8 < lag1 < 0.97
+    assert 0.8 < noise[1:].std() < 1.2
+    mppi.close()
+
+
+def test_batched_rollout_equals_stepping_one_by_one():
+    model = gantry_model()
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    state = get_state(model, data)
+    rng = np.random.default_rng(3)
+    controls = data.ctrl + rng.normal(scale=0.05, size=(4, 3, model.nu))
+    previous = data.ctrl.copy()
+    rollout = BatchedRollout(model, 0.02, nthread=2)
+    states = rollout(state, controls, previous)
+    assert states.shape == (4, 3, state.size)
+    qpos_offset, _ = state_layout(model)
+    for path in range(4):
+        fresh = mujoco.MjData(model)
+        mujoco.mj_setState(model, fresh, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        data = fresh
+        for k, target in enumerate(rollout.substep_controls(previous, controls[path : path + 1])[0]):
+            data.ctrl[:] = target
+            mujoco.mj_step(model, data)
+            if (k + 1) % rollout.substeps == 0:
+                np.testing.assert_allclose(
+                    states[path, k // rollout.substeps, qpos_offset : qpos_offset + model.nq], data.qpos, atol=1e-6
+                )
+    rollout.close()
+
+
+def test_mppi_steers_the_gantry_to_a_point():
+    model = gantry_model()
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    hand = model.body("hand").id
+    goal = np.array([0.2, -0.1, 0.25])
+    qpos_offset, _ = state_layout(model)
+
+    def reward(states, controls):
+        qpos = states[..., qpos_offset : qpos_offset + model.nq]
+        hand_xyz = np.stack([qpos[..., 0], qpos[..., 1], 0.3 + qpos[..., 2]], axis=-1)
+        return -np.linalg.norm(hand_xyz - goal, axis=-1)
+
+    limits = ControlLimits.from_model(model, 0.5)
+    mppi = Mppi(model, MppiConfig(nthread=1, seed=1), limits)
+    mppi.reset()
+    control = data.ctrl.copy()
+    basis = np.zeros((3, model.nu))
+    basis[[0, 1, 2], [0, 1, 2]] = 0.3
+    start = np.linalg.norm(data.xpos[hand] - goal)
+    for _ in range(60):
+        result = mppi.step(get_state(model, data), control, reward, basis)
+        for target in mppi.rollout.substep_controls(control, result.control[None, None])[0]:
+            data.ctrl[:] = target
+            mujoco.mj_step(model, data)
+        control = result.control
+        mppi.shift()
+    mujoco.mj_forward(model, data)
+    assert np.linalg.norm(data.xpos[hand] - goal) < 0.1 * start
+    mppi.close()
+
+
+def test_non_finite_returns_get_no_weight():
+    model = gantry_model()
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    mppi = Mppi(model, MppiConfig(nthread=0), ControlLimits.from_model(model, 0.5))
+    calls = []
+
+    def reward(states, controls):
+        r = np.zeros(states.shape[:2])
+        r[1] = np.nan
+        calls.append(1)
+        return r
+
+    result = mppi.step(get_state(model, data), data.ctrl.copy(), reward, 0.1 * np.eye(model.nu))
+    assert result.weights[1] == 0 and np.isclose(result.weights.sum(), 1.0)
+    assert np.all(np.isfinite(result.control))
+    mppi.close()
