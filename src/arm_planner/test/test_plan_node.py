@@ -1,0 +1,101 @@
+"""plan_node in-process: goals over the real action interface, refusals keep the node serving."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+import rclpy
+import trimesh
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from arm_interfaces.action import Manipulate
+from arm_interfaces.msg import ReconstructedObject, ReconstructedObjectArray
+from arm_planner.plan_node import PlanNode
+from arm_sim import robot
+from arm_sim.conversions import matrix_to_pose, mesh_to_msg
+from arm_sim.ros_common import latched_qos
+
+
+@pytest.fixture(scope="module")
+def graph():
+    rclpy.init()
+    node = PlanNode(parameter_overrides=[Parameter("steps", value=5), Parameter("settle_s", value=0.0)])
+    client = Node("plan_node_test_client")
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    executor.add_node(client)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    received = []
+    client.create_subscription(JointTrajectory, "arm/joint_trajectory", received.append, 10)
+    action = ActionClient(client, Manipulate, "arm/manipulate")
+    assert action.wait_for_server(timeout_sec=10)
+    yield node, client, action, received
+    node.close()
+    executor.shutdown()
+    node.destroy_node()
+    client.destroy_node()
+    rclpy.try_shutdown()
+
+
+def _wait(future, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while not future.done():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+    return future.result()
+
+
+def _send(action, task, target_id, displacement=(0.0, 0.0, 0.0)):
+    goal = Manipulate.Goal(task=task, target_id=target_id)
+    goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z = displacement
+    handle = _wait(action.send_goal_async(goal))
+    assert handle.accepted
+    return _wait(handle.get_result_async()).result
+
+
+def _publish_inputs(client, joint_positions):
+    box = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
+    T = np.eye(4)
+    T[:3, 3] = (0.0, 0.0, 0.04)
+    meshes = ReconstructedObjectArray(table_height_m=0.0)
+    meshes.objects = [ReconstructedObject(id=4, pose=matrix_to_pose(T), mesh=mesh_to_msg(box.vertices, box.faces))]
+    client.create_publisher(ReconstructedObjectArray, "arm/meshes", latched_qos()).publish(meshes)
+    joints = client.create_publisher(JointState, "joint_states", 1)
+    names = list(robot.JOINT_NAMES) + [robot.FINGER_JOINT_NAMES[0]]
+    joints.publish(JointState(name=names, position=list(joint_positions)))
+    return joints, names
+
+
+def test_refusals_then_a_plan(graph):
+    node, client, action, received = graph
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    assert not result.success and "no joint states" in result.message
+    joints, names = _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    deadline = time.monotonic() + 10
+    while node.meshes_received == 0 or node._joints is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 9)
+    assert "unknown target id 9" in result.message
+    result = _send(action, Manipulate.Goal.TASK_PUSH, 4, (2.0, 0.0, 0.0))
+    assert "out of reach" in result.message
+    result = _send(action, 17, 4)
+    assert "unknown task" in result.message
+    result = _send(action, Manipulate.Goal.TASK_PUSH, 4, (0.05, -0.3, 0.0))
+    assert len(result.trajectory.points) == 5 and result.trajectory.joint_names == names
+    deadline = time.monotonic() + 5
+    while not received:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert len(received[-1].points) == 5
+    joints.publish(JointState(name=names, position=[float("nan")] * 8))
+    time.sleep(0.3)
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    assert "invalid" in result.message
