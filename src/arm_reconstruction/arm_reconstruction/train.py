@@ -67,8 +67,10 @@ class TrainConfig:
     checkpoint_every: int = 200
     eval_every: int = 1000
     eval_samples: int = 512
+    final_eval_samples: int = 0
     time_limit_min: float = 0.0
     save_float16: bool = True
+    init_from: str = ""
 
     def __post_init__(self):
         if self.variant not in PRIORS:
@@ -256,10 +258,14 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
     rng = np.random.default_rng([config.seed, rank])
     augment_generator = torch.Generator().manual_seed(config.seed * 1000 + rank)
     step, history, evaluations, elapsed_s = 0, [], [], 0.0
-    if state_path.is_file():
-        state = torch.load(state_path, map_location=device, weights_only=False)
-        if state["config"]["variant"] != config.variant:
-            raise SystemExit(f"{state_path} belongs to variant {state['config']['variant']}, not {config.variant}")
+    start_path = state_path if state_path.is_file() else pathlib.Path(config.init_from) if config.init_from else None
+    if start_path is not None:
+        state = torch.load(start_path, map_location=device, weights_only=False)
+        state_variant = state["config"]["variant"]
+        if start_path == state_path and state_variant != config.variant:
+            raise SystemExit(f"{state_path} belongs to variant {state_variant}, not {config.variant}")
+        if VARIANTS[state_variant] != VARIANTS[config.variant]:
+            raise SystemExit(f"--init-from {start_path}: variant {state_variant} reads other input channels")
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
         step, history, evaluations = state["step"], state["history"], state["evaluations"]
@@ -326,7 +332,7 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
     if rank != 0:
         torch.distributed.destroy_process_group()
         return {"step": step}
-    metrics = evaluate(model, test_set, device, max_samples=0)
+    metrics = evaluate(model, test_set, device, max_samples=config.final_eval_samples)
     evaluations.append({"step": step, **metrics})
     plot_curves(history, evaluations, work_dir / "curves.png")
     result = {
@@ -432,7 +438,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
     parser.add_argument("--eval-samples", type=int, default=defaults.eval_samples)
+    parser.add_argument("--init-from", default="", help="start from another run's state.pt (same input "
+                        "channels: weights, optimiser, step and history) when --work-dir has no state yet")
     parser.add_argument("--save-float32", action="store_true", help="store float32 weights (default float16)")
+    parser.add_argument("--final-eval-samples", type=int, default=defaults.final_eval_samples,
+                        help="held-out samples for the final metrics (0: all)")
     parser.add_argument("--time-limit-min", type=float, default=defaults.time_limit_min,
                         help="stop after this many minutes of this session and finish (0: no limit)")
     return parser
