@@ -34,14 +34,17 @@ def extrude_to_table(probabilities: np.ndarray) -> np.ndarray:
 def drop_small_components(
     probabilities: np.ndarray, threshold: float, min_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
 ) -> np.ndarray:
-    """Zero the probabilities of 6-connected occupied components smaller than min_voxels."""
+    """Zero the probabilities of 6-connected occupied components smaller than min_voxels; the largest
+    component is always kept (a thin object may occupy only a few voxels)."""
     occupied = probabilities > threshold
     if min_voxels <= 1 or not occupied.any():
         return probabilities
     labels, count = ndimage.label(occupied)
     sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    sizes[0] = 0
     small = sizes < min_voxels
     small[0] = False
+    small[int(np.argmax(sizes))] = False
     return np.where(small[labels], np.float32(0.0), probabilities).astype(np.float32)
 
 

@@ -78,6 +78,12 @@ def test_specks_are_dropped_and_bad_probabilities_are_handled():
     probabilities[12, 12, 12] = 1.0
     cleaned = drop_small_components(probabilities, 0.5, 4)
     assert cleaned[12, 12, 12] == 0 and cleaned[2:6, 2:6, 2:6].min() == 1
+    lone = np.zeros((16, 16, 16), np.float32)
+    lone[3, 3, 0:2] = 0.9
+    lone[9, 9, 9] = 0.9
+    kept = drop_small_components(lone, 0.5, 4)
+    assert kept[3, 3, 0] == 0.9 and kept[9, 9, 9] == 0, "the largest component survives even when small"
+    assert occupancy_mesh(lone, frame).is_watertight
     assert len(occupancy_mesh(probabilities, frame).split(only_watertight=False)) == 1
     assert len(occupancy_mesh(np.zeros((16, 16, 16), np.float32), frame).faces) == 0
     with_nan = probabilities.copy()
