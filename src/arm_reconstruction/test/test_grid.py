@@ -242,8 +242,8 @@ def test_grid_is_fast_enough():
     for n in range(10):
         labels[200:260, 40 + 55 * n : 80 + 55 * n] = n + 1
     result = frame_grids(depth, K, T, labels)
-    start = time.perf_counter()
+    start = time.process_time()
     result = frame_grids(depth, K, T, labels)
-    per_object_ms = (time.perf_counter() - start) / 10 * 1000
+    per_object_ms = (time.process_time() - start) / 10 * 1000
     assert len(result.object_ids) == 10
-    assert per_object_ms < 60, f"{per_object_ms:.1f} ms per object (target 20 ms; loose bound for a shared CPU)"
+    assert per_object_ms < 40, f"{per_object_ms:.1f} CPU-ms per object (target 20 ms; loose bound for a shared CPU)"
