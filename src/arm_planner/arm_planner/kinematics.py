@@ -28,14 +28,7 @@ def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
     )
 
 
-def axis_angle_to_matrix(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    """Rotation matrices [..., 3, 3] about a fixed unit axis (3,) by angles [...] (Rodrigues)."""
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    s = np.sin(angle_rad)[..., None, None]
-    c = np.cos(angle_rad)[..., None, None]
-    return np.eye(3) + s * k + (1 - c) * (k @ k)
+_EYE = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -45,6 +38,11 @@ class _Joint:
     axis: np.ndarray
     anchor: np.ndarray
     qpos0: np.ndarray
+
+    @property
+    def skew(self) -> np.ndarray:
+        a = self.axis / np.linalg.norm(self.axis)
+        return np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
 
 
 @dataclass(frozen=True)
@@ -86,6 +84,7 @@ class BodyKinematics:
                 )
             links.append(_Link(model.body_pos[b].copy(), quat_to_matrix(model.body_quat[b]), tuple(joints)))
         self._links = tuple(links)
+        self._skews = {id(j): (j.skew, j.skew @ j.skew) for link in links for j in link.joints}
         self._point = np.zeros(3) if point_in_body is None else np.asarray(point_in_body, dtype=np.float64)
         self.body_id = body_id
 
@@ -107,7 +106,8 @@ class BodyKinematics:
                     pos = pos + (rot @ joint.axis) * offset[..., None]
                 else:
                     angle = qpos[..., joint.qpos_adr] - joint.qpos0[0]
-                    r_joint = axis_angle_to_matrix(joint.axis, angle)
+                    k, k2 = self._skews[id(joint)]
+                    r_joint = _EYE + np.sin(angle)[..., None, None] * k + (1 - np.cos(angle))[..., None, None] * k2
                     anchor_world = pos + rot @ joint.anchor
                     rot = rot @ r_joint
                     pos = anchor_world - rot @ joint.anchor

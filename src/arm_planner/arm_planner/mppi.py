@@ -91,6 +91,9 @@ class BatchedRollout:
         self.nstate = mujoco.mj_stateSize(model, STATE_SPEC)
         self._buffers: dict[tuple[int, int], np.ndarray] = {}
         self._models: dict[int, list[mujoco.MjModel]] = {}
+        self._never_asleep = model.ntree - len(free_body_trees(model))
+        for data in self._datas:
+            mujoco.mj_resetData(model, data)
 
     def substep_controls(self, previous: np.ndarray, controls: np.ndarray) -> np.ndarray:
         """Targets per physics step [N, H * substeps, nu]: linear from the previous control step's
@@ -113,7 +116,8 @@ class BatchedRollout:
         init = np.ascontiguousarray(np.broadcast_to(initial_state, (n, self.nstate)), dtype=np.float64)
         if self.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP):
             for data in self._datas:
-                mujoco.mj_resetData(self.model, data)
+                if data.ntree_awake > self._never_asleep:  # an object woke in the last batch
+                    mujoco.mj_resetData(self.model, data)
         models = self._models.get(n)
         if models is None:
             models = self._models[n] = [self.model] * n

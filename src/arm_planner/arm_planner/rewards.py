@@ -109,18 +109,22 @@ class TaskReward:
         target_pos, _ = self.target(qpos)
         return hand_pos, hand_rot, target_pos
 
-    def blend_hand(self, states: np.ndarray, controls: np.ndarray, score) -> np.ndarray:
-        """score(hand_pos, hand_rot) on the simulated pose, blended with the commanded pose's score."""
+    def rollout_poses(self, states: np.ndarray, controls: np.ndarray):
+        """(target centre, hand poses): the simulated hand and, if blended, the commanded one."""
         qpos = states[..., self.qpos_offset : self.qpos_offset + self.nq]
-        hand_pos, hand_rot = self.hand(qpos)
-        actual = score(hand_pos, hand_rot)
+        target_pos, _ = self.target(qpos)
+        hands = [(1.0, *self.hand(qpos))]
         share = self.weights.command
-        if share <= 0 or self.arm_qpos_adr is None:
-            return actual
-        commanded_qpos = qpos.copy()
-        commanded_qpos[..., self.arm_qpos_adr] = controls[..., self.arm_actuators]
-        cmd_pos, cmd_rot = self.hand(commanded_qpos)
-        return (1.0 - share) * actual + share * score(cmd_pos, cmd_rot)
+        if share > 0 and self.arm_qpos_adr is not None:
+            commanded_qpos = qpos.copy()
+            commanded_qpos[..., self.arm_qpos_adr] = controls[..., self.arm_actuators]
+            hands = [(1.0 - share, *hands[0][1:]), (share, *self.hand(commanded_qpos))]
+        return target_pos, hands
+
+    @staticmethod
+    def blend(hands, score) -> np.ndarray:
+        """score(hand_pos, hand_rot) weighted over the simulated and commanded hand poses."""
+        return sum(weight * score(pos, rot) for weight, pos, rot in hands)
 
     def funnel_penalty(self, hand_pos: np.ndarray, point: np.ndarray) -> np.ndarray:
         w = self.weights
@@ -167,12 +171,10 @@ class GraspReward(TaskReward):
 
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
-        _, _, target_pos = self.poses(states)
+        target_pos, hands = self.rollout_poses(states, controls)
         grasp_point = target_pos + self.grasp_offset
         if self.state == "grasped":
-            reach = self.blend_hand(
-                states, controls, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
-            )
+            reach = self.blend(hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1))
             return reach - w.goal * np.linalg.norm(self.goal - target_pos, axis=-1)
 
         def score(pos, rot):
@@ -183,7 +185,7 @@ class GraspReward(TaskReward):
                 - w.yaw * _yaw_error(rot, self.closing_axis)
             )
 
-        return self.blend_hand(states, controls, score)
+        return self.blend(hands, score)
 
     def update(self, state: np.ndarray) -> str:
         """Advance the state machine on the executed state; returns the new state name."""
@@ -247,7 +249,7 @@ class PushReward(TaskReward):
 
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
-        _, _, target_pos = self.poses(states)
+        target_pos, hands = self.rollout_poses(states, controls)
         contact = self._contact_point(target_pos)
         pushing = self.state == "pushing"
 
@@ -255,7 +257,7 @@ class PushReward(TaskReward):
             value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * _angle_down(rot)
             return value if pushing else value - w.height * self.funnel_penalty(pos, contact)
 
-        reward = self.blend_hand(states, controls, score)
+        reward = self.blend(hands, score)
         if pushing:
             reward = reward - w.goal * 2.0 * np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1)
         return reward

@@ -95,21 +95,33 @@ def _valid_hull(vertices: np.ndarray) -> trimesh.Trimesh | None:
     return hull
 
 
-def usable_parts(obj: TwinObject, decompose: bool = True) -> list[trimesh.Trimesh]:
+def decompose(mesh: trimesh.Trimesh, max_parts: int = MAX_DECOMPOSITION_PARTS) -> list[trimesh.Trimesh]:
+    """Convex parts of a watertight mesh: arm_reconstruction's fast plane-split decomposer when it is
+    installed, else CoACD through arm_sim's on-disk cache."""
+    try:
+        from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
+    except ImportError:
+        from arm_sim.objects import decompose_cached
+
+        return decompose_cached(mesh, max_parts)
+    global _DECOMPOSER
+    if _DECOMPOSER is None:
+        _DECOMPOSER = ConvexDecomposer(DecompositionSettings(max_parts=max_parts))
+    return _DECOMPOSER(mesh)
+
+
+_DECOMPOSER = None
+
+
+def usable_parts(obj: TwinObject, decompose_missing: bool = True) -> list[trimesh.Trimesh]:
     """Convex hulls of the object's parts; decomposes its mesh when it arrives without parts."""
     parts = [h for h in (_valid_hull(p.vertices) for p in obj.convex_parts) if h is not None]
     if parts or obj.mesh is None or len(obj.mesh.vertices) == 0:
         return parts
-    if decompose and obj.mesh.is_watertight and len(obj.mesh.faces) >= 4:
+    if decompose_missing and obj.mesh.is_watertight and len(obj.mesh.faces) >= 4:
         try:
-            from arm_sim.objects import decompose_cached
-
-            parts = [
-                h
-                for h in (_valid_hull(p.vertices) for p in decompose_cached(obj.mesh, MAX_DECOMPOSITION_PARTS))
-                if h is not None
-            ]
-        except Exception:
+            parts = [h for h in (_valid_hull(p.vertices) for p in decompose(obj.mesh)) if h is not None]
+        except Exception:  # a decomposition failure falls back to the hull below
             parts = []
     if not parts:
         hull = _valid_hull(obj.mesh.vertices)
