@@ -1,1 +1,2 @@
-"""ARM amodal reconstruction: four-channel grids, 3D network with stability and connectivity priors, simulation-ready meshes."""
+"""ARM amodal reconstruction: four-channel grids, a 3D network trained with stability and
+connectivity priors, and simulation-ready meshes."""
