@@ -99,12 +99,13 @@ def score_scene(frame) -> dict:
     gt = frame["labels"]
     result = {"n_objects": int(frame["n_objects"]), "n_visible": int(np.count_nonzero(np.unique(gt)))}
     for name, method in METHODS.items():
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         labels = method(frame["rgb"], frame["depth"], frame["K"], frame["T"])
         latency_ms = 1e3 * (time.perf_counter() - start)
+        cpu_ms = 1e3 * (time.process_time() - start_cpu)
         metrics = segmentation_metrics(labels, gt)
         result[name] = {**{k: float(metrics[k]) for k in METRIC_KEYS}, "n_pred": metrics["n_pred"],
-                        "latency_ms": latency_ms}
+                        "latency_ms": latency_ms, "cpu_ms": cpu_ms}
     return result
 
 
@@ -117,6 +118,7 @@ def aggregate(rows: list[dict]) -> dict:
         latencies = [r[name]["latency_ms"] for r in rows]
         out[name]["latency_ms_median"] = float(np.median(latencies))
         out[name]["latency_ms_p90"] = float(np.percentile(latencies, 90))
+        out[name]["cpu_ms_median"] = float(np.median([r[name].get("cpu_ms", np.nan) for r in rows]))
     return out
 
 
@@ -175,14 +177,15 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
                  f"{'off' if args.no_noise else 'on'}), 640x480 frames. Metrics as in the UOIS papers "
                  "(Hungarian matching on overlap F; boundary tolerance ceil(0.003 x diagonal) px), averaged "
                  "over frames. Latency: wall time per frame on this machine "
-                 f"({summary['machine']}, {summary['cpu_count']} CPUs, shared with other jobs while measured).")
+                 f"({summary['machine']}, {summary['cpu_count']} CPUs, load average {summary['load_average']:.1f} "
+                 "while measured: the wall time includes waiting for a core); CPU: process CPU time per frame.")
     lines.append("")
     for subset, stats in summary["subsets"].items():
         lines.append(f"## {subset}: {stats.get('scenes', 0)} scenes")
         lines.append("")
         lines.append("| method | overlap P | overlap R | overlap F | boundary P | boundary R | boundary F | F@75% "
-                     "| latency median ms | p90 ms |")
-        lines.append("|---|---|---|---|---|---|---|---|---|---|")
+                     "| latency median ms | p90 ms | CPU median ms |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for name in METHODS:
             if name not in stats:
                 continue
@@ -190,7 +193,7 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
             lines.append(f"| {name} | {s['overlap_precision']:.3f} | {s['overlap_recall']:.3f} | "
                          f"{s['overlap_f']:.3f} | {s['boundary_precision']:.3f} | {s['boundary_recall']:.3f} | "
                          f"{s['boundary_f']:.3f} | {s['f_at_75']:.3f} | {s['latency_ms_median']:.0f} | "
-                         f"{s['latency_ms_p90']:.0f} |")
+                         f"{s['latency_ms_p90']:.0f} | {s['cpu_ms_median']:.0f} |")
         lines.append("")
     gain = summary.get("dense_overlap_f_gain_over_baseline")
     if gain is not None:
@@ -249,6 +252,7 @@ def main(argv=None) -> int:
         "depth_noise": not args.no_noise,
         "machine": f"{platform.machine()} {platform.processor() or 'cpu'}, python {platform.python_version()}",
         "cpu_count": os.cpu_count(),
+        "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
     if dense:

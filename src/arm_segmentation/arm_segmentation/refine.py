@@ -66,20 +66,28 @@ def refine_full_resolution(
 ) -> np.ndarray:
     """Full-resolution uint16 labels from working-grid labels (see the module docstring)."""
     shape = depth_m.shape
-    labels = upsample(labels_work, stride, shape)
     n = int(labels_work.max())
     if n == 0:
-        return labels
-    near = cv2.dilate((labels > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=params.search_radius_px)
-    ys, xs = np.nonzero(near)
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+        return np.zeros(shape, dtype=np.uint16)
+    wy, wx = np.nonzero(labels_work)
+    margin = -(-params.search_radius_px // stride) + 1
+    wy0, wx0 = max(wy.min() - margin, 0), max(wx.min() - margin, 0)
+    wy1, wx1 = min(wy.max() + margin + 1, labels_work.shape[0]), min(wx.max() + margin + 1, labels_work.shape[1])
+    y0, x0 = wy0 * stride, wx0 * stride
+    y1, x1 = min(wy1 * stride, shape[0]), min(wx1 * stride, shape[1])
     crop = (slice(y0, y1), slice(x0, x1))
+
+    def up(image):
+        return upsample(image[wy0:wy1, wx0:wx1], stride, (y1 - y0, x1 - x0))
+
+    labels_crop = up(labels_work)
+    near = cv2.dilate((labels_crop > 0).astype(np.uint8), np.ones((3, 3), np.uint8),
+                      iterations=params.search_radius_px)
     K_crop = K.copy()
     K_crop[0, 2] -= x0
     K_crop[1, 2] -= y0
     depth = depth_m[crop]
-    labels_crop = labels[crop]
-    support = upsample(support_work, stride, shape)[crop]
+    support = up(support_work)
     height = world_height(depth, K_crop, T_world_camera) - support
     has_depth = depth > 0
     band = band_for_depth(depth, table_params)
@@ -87,9 +95,9 @@ def refine_full_resolution(
         above = has_depth & (height > band) & (height <= table_params.max_object_height_m)
         table = has_depth & (np.abs(height) <= band)
     chroma = chromaticity(rgb[crop], blur=params.colour_blur_px)
-    colour_only = (table | ~has_depth) & (near[crop] > 0)
+    colour_only = (table | ~has_depth) & (near > 0)
     if table_chroma_work is not None:
-        table_chroma = upsample(table_chroma_work, stride, shape)[crop]
+        table_chroma = up(table_chroma_work)
         cy, cx = np.nonzero(colour_only)
         off_table = hue_distance(chroma[cy, cx], table_chroma[cy, cx]) > params.table_colour_threshold
         colour_only[cy[~off_table], cx[~off_table]] = False

@@ -97,7 +97,9 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     if np.any(table) and np.any(objects):
         table_chroma = local_table_chroma(chroma, table, params.table_colour_window_px)
         not_table_colour = hue_distance(chroma, table_chroma) > params.table_colour_threshold
-        near_objects = ndimage.distance_transform_edt(~objects) <= params.candidate_radius_px
+        radius = params.candidate_radius_px
+        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        near_objects = cv2.dilate(objects.astype(np.uint8), disk) > 0
         candidates = near_objects & not_table_colour & (table | (smoothed <= 0))
     labels = cluster_instances(
         points_camera, normals_camera, smoothed, chroma, objects, candidates, valid, area, table_chroma, params.cluster
