@@ -72,12 +72,16 @@ class PlannerConfig:
     weights: RewardWeights = field(default_factory=RewardWeights)
     close_steps: int = 75
     grasp_lift_goal_m: float = 0.10
+    rearrange_carry_height_m: float = 0.04
     # Let resting objects sleep in the twin (no collision work until touched); see mppi.set_sleep.
     sleep_objects: bool = True
     # Physics time the twin is settled for (robot holding still) before planning.
     settle_s: float = 0.3
     # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
     done_hold_steps: int = 10
+    # ... and the target is within this distance of the reward's goal (tighter than the task's
+    # tolerance, for margin against twin/world mismatch), m.
+    done_goal_distance_m: float = 0.01
 
 
 @dataclass
@@ -133,7 +137,10 @@ class Planner:
         if request.task == TASK_GRASP:
             displacement = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
         if request.task in (TASK_GRASP, TASK_REARRANGE):
-            reward = GraspReward(**common, goal_displacement=displacement, close_steps=self.config.close_steps)
+            carry = self.config.rearrange_carry_height_m if request.task == TASK_REARRANGE else 0.0
+            reward = GraspReward(
+                **common, goal_displacement=displacement, close_steps=self.config.close_steps, carry_height_m=carry
+            )
         elif request.task == TASK_PUSH:
             reward = PushReward(**common, goal_displacement=displacement)
         else:
@@ -225,7 +232,8 @@ class Planner:
             self.mppi.shift()
             met, error = self.evaluate(reward, request.task, executed, request.tolerance_m)
             holding = request.task == TASK_PUSH or reward.state == "grasped"
-            met_streak = met_streak + 1 if (met and holding) else 0
+            close = reward.error(executed) <= cfg.done_goal_distance_m
+            met_streak = met_streak + 1 if (met and holding and close) else 0
             if feedback is not None:
                 feedback(step + 1, cfg.mppi.steps, states[-1], error)
             if cfg.done_hold_steps and met_streak >= cfg.done_hold_steps:

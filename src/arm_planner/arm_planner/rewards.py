@@ -145,6 +145,8 @@ class GraspReward(TaskReward):
     stall_eps_m: float = 0.002
     max_close_distance_m: float = 0.015
     grasp_depth_m: float = 0.03
+    # Rearrange: carry the object this high while it is far from the goal, set it down on arrival.
+    carry_height_m: float = 0.0
     _history: list = field(default_factory=list)
     _closing_since: int = -1
     _grasp_offset: np.ndarray | None = None
@@ -162,6 +164,14 @@ class GraspReward(TaskReward):
     def gripper_closed(self) -> bool:
         return self.state != "ungrasped"
 
+    def carry_goal(self, target_pos: np.ndarray) -> np.ndarray:
+        """The goal, raised by carry_height_m while the object is more than 5 cm from it horizontally."""
+        if self.carry_height_m <= 0:
+            return self.goal
+        d_xy = np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1)
+        lift = self.carry_height_m * np.clip(d_xy / 0.05, 0.0, 1.0)
+        return self.goal + np.stack([np.zeros_like(lift), np.zeros_like(lift), lift], axis=-1)
+
     def resume(self, state: str, steps_in_state: int) -> None:
         """Continue a task already under way (re-planning): grasping for `steps_in_state` steps, or grasped."""
         if state not in ("ungrasped", "grasping", "grasped"):
@@ -175,7 +185,7 @@ class GraspReward(TaskReward):
         grasp_point = target_pos + self.grasp_offset
         if self.state == "grasped":
             reach = self.blend(hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1))
-            return reach - w.goal * np.linalg.norm(self.goal - target_pos, axis=-1)
+            return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
         def score(pos, rot):
             return (
@@ -214,7 +224,10 @@ class PushReward(TaskReward):
     """Approach a point behind the target (w.r.t. the goal direction) low over the table, then push."""
 
     goal_displacement: np.ndarray = field(default_factory=lambda: np.array([0.05, -0.30, 0.0]))
+    # Hand target behind the object's surface: clear of it while approaching, 1 cm into it while
+    # pushing (so that pressing on, not hovering at the surface, is what the reward pays for).
     contact_gap_m: float = 0.015
+    push_gap_m: float = -0.01
     engage_distance_m: float = 0.02
     disengage_distance_m: float = 0.06
     state: str = "approaching"
@@ -235,11 +248,12 @@ class PushReward(TaskReward):
             raise ValueError(f"cannot resume a push in state {state!r}")
         self.state = state
 
-    def _contact_point(self, target_pos: np.ndarray) -> np.ndarray:
+    def _contact_point(self, target_pos: np.ndarray, gap_m: float | None = None) -> np.ndarray:
+        gap_m = self.contact_gap_m if gap_m is None else gap_m
         to_goal = self.goal[:2] - target_pos[..., :2]
         direction = to_goal / (np.linalg.norm(to_goal, axis=-1, keepdims=True) + 1e-9)
         reach = self._support_batch(-direction)
-        xy = target_pos[..., :2] - direction * (reach + self.contact_gap_m)[..., None]
+        xy = target_pos[..., :2] - direction * (reach + gap_m)[..., None]
         z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
         return np.concatenate([xy, z[..., None]], axis=-1)
 
@@ -250,8 +264,8 @@ class PushReward(TaskReward):
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
         target_pos, hands = self.rollout_poses(states, controls)
-        contact = self._contact_point(target_pos)
         pushing = self.state == "pushing"
+        contact = self._contact_point(target_pos, self.push_gap_m if pushing else self.contact_gap_m)
 
         def score(pos, rot):
             value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * _angle_down(rot)

@@ -20,8 +20,8 @@ from arm_planner.mppi import STATE_SPEC
 from arm_planner.rewards import TargetGeometry
 from arm_planner.robot_spec import RobotSpec
 
-MIN_PART_VOLUME_M3 = 1e-8
-MIN_EXTENT_M = 0.003
+MIN_PART_VOLUME_M3 = 1e-10
+MIN_EXTENT_M = 0.0005
 MAX_DECOMPOSITION_PARTS = 8
 MAX_GEOMETRY_VERTICES = 400
 
