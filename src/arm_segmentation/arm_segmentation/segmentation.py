@@ -35,6 +35,8 @@ class SegmentationParams:
     input subsampled by working_stride (2: a 640x480 frame is processed at 320x240)."""
 
     working_stride: int = 2
+    workspace_min_m: tuple[float, float, float] = (-np.inf, -np.inf, -np.inf)  # world-frame crop box;
+    workspace_max_m: tuple[float, float, float] = (np.inf, np.inf, np.inf)  # object points outside are ignored
 
     fill_radius_px: int = 1
     smooth_sigma_m: float = 0.01
@@ -91,6 +93,10 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
     support = support_heights(points_world, smoothed, levels, params.table)
     table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
+    if np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any():
+        lo = np.asarray(params.workspace_min_m, dtype=np.float32)
+        hi = np.asarray(params.workspace_max_m, dtype=np.float32)
+        objects &= np.all((points_world >= lo) & (points_world <= hi), axis=-1)
     chroma = chromaticity(rgb)
     candidates = np.zeros_like(objects)
     table_chroma = None

@@ -43,8 +43,16 @@ class SegmentationNode(Node):
         max_height = declare(self, "max_object_height_m", 0.6, "Tallest object above its table, metres", 0.02, 3.0)
         min_area = declare(self, "min_instance_area_m2", 3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
         use_colour = declare(self, "use_colour", True, "Use colour cues (off: geometry only)")
+        workspace_min = declare(self, "workspace_min_m", [-100.0, -100.0, -100.0],
+                                "World-frame box (lower corner, metres) outside which nothing is an object")
+        workspace_max = declare(self, "workspace_max_m", [100.0, 100.0, 100.0],
+                                "World-frame box (upper corner, metres) outside which nothing is an object")
+        if len(workspace_min) != 3 or len(workspace_max) != 3:
+            raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
         self.params = SegmentationParams(
             working_stride=stride,
+            workspace_min_m=tuple(float(v) for v in workspace_min),
+            workspace_max_m=tuple(float(v) for v in workspace_max),
             table=TableParams(min_table_area_m2=min_table, max_object_height_m=max_height),
             cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
         )
