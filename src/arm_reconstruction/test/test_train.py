@@ -88,3 +88,15 @@ def test_voxel_metrics_on_constructed_grids():
     assert metrics["iou"][1] == 0.0 and metrics["chamfer_m"][1] > 0.06
     assert metrics["stable"].tolist() == [True, False, True]
     assert metrics["single_component"].tolist() == [True, True, False]
+
+
+def test_ablation_can_start_from_a_shared_trunk(box_data, tmp_path):
+    train(_config(box_data, tmp_path / "trunk", variant="arm-c-s", steps=2), progress=False)
+    trunk = tmp_path / "trunk" / "state.pt"
+    config = _config(box_data, tmp_path / "arm", variant="arm", steps=3, init_from=str(trunk))
+    result = train(config, progress=False)
+    history = read_checkpoint(tmp_path / "arm" / "arm.pt")["extra"]["loss_history"]
+    assert result["steps"] == 3 and "connectivity" in history[-1] and "connectivity" not in history[0]
+    with pytest.raises(SystemExit):
+        train(_config(box_data, tmp_path / "base", variant="baseline", steps=3, init_from=str(trunk)),
+              progress=False)
