@@ -21,11 +21,16 @@ NODES = {
 }
 
 
+SHIPPED_CHECKPOINT = ROOT / "src" / "arm_reconstruction" / "arm_reconstruction" / "checkpoints" / "arm.pt"
+
+
 def node_available(key: str) -> bool:
+    """The node is built (and, for reconstruction, its shipped checkpoint is there)."""
     package, executable, _ = NODES[key]
-    return (ROOT / "install" / package / "lib" / package / executable).exists() and (
+    built = (ROOT / "install" / package / "lib" / package / executable).exists() and (
         ROOT / "src" / package / package / f"{executable}.py"
     ).exists()
+    return built and (key != "reconstruction" or SHIPPED_CHECKPOINT.exists())
 
 
 class Graph:
