@@ -28,5 +28,8 @@ bench-recon: setup
 bench-manip: setup
 	@$(ENV) && bench_manip $(ARGS)
 
+bench-robustness: setup
+	@$(ENV) && bench_robustness $(ARGS)
+
 clean:
 	rm -rf build install log

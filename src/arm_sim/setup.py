@@ -21,6 +21,9 @@ setup(
         "console_scripts": [
             "sim_node = arm_sim.sim_node:main",
             "bench_perf = arm_sim.bench_perf:main",
+            "record = arm_sim.bag_record:main",
+            "replay = arm_sim.bag_replay:main",
+            "bench_robustness = arm_sim.bench_robustness:main",
         ],
     },
 )
