@@ -18,9 +18,9 @@ from arm_sim.conversions import (
     depth_to_metres,
     image_to_numpy,
     matrix_to_pose,
-    mesh_to_msg,
     msg_to_mesh,
     numpy_to_image,
+    object_msg,
     pose_to_matrix,
 )
 
@@ -103,12 +103,8 @@ def grid_from_msg(msg: GridMetadata) -> GridFrame | None:
 
 
 def object_to_msg(obj: ReconstructedObject) -> ReconstructedObjectMsg:
-    msg = ReconstructedObjectMsg(id=int(obj.id), visible_fraction=float(obj.visible_fraction), method=obj.method)
-    msg.pose = matrix_to_pose(obj.T_world_object)
-    msg.mesh = mesh_to_msg(obj.mesh.vertices, obj.mesh.faces)
-    msg.convex_parts = [mesh_to_msg(p.vertices, p.faces) for p in obj.convex_parts]
-    msg.grid = grid_to_msg(obj.grid)
-    return msg
+    return object_msg(obj.id, obj.T_world_object, obj.mesh, obj.convex_parts, obj.visible_fraction, obj.method,
+                      grid_to_msg(obj.grid))
 
 
 def object_from_msg(msg: ReconstructedObjectMsg) -> ReconstructedObject:

@@ -174,28 +174,33 @@ def K_from_camera_info(info: CameraInfo) -> np.ndarray:
     return K
 
 
-def reconstructed_object_msg(
-    object_id: int, mesh_world, convex_parts_world=(), visible_fraction: float = -1.0, method: str = "",
-    grid=None,
-):
-    """World-frame meshes (trimesh or (V, F)) -> arm_interfaces/ReconstructedObject. The object frame is
-    parallel to the world frame with its origin at the mesh centroid (see the message definition)."""
+def object_msg(object_id: int, T_world_object, mesh_local, convex_parts_local=(), visible_fraction: float = -1.0,
+               method: str = "", grid=None):
+    """Object-frame meshes (trimesh or (V, F)) + T_world_object -> arm_interfaces/ReconstructedObject."""
     from arm_interfaces.msg import ReconstructedObject
 
-    def as_vf(mesh):
-        return (np.asarray(mesh.vertices), np.asarray(mesh.faces)) if hasattr(mesh, "vertices") else mesh
-
-    vertices, faces = as_vf(mesh_world)
-    centre = np.asarray(vertices, dtype=np.float64).mean(axis=0) if len(vertices) else np.zeros(3)
     msg = ReconstructedObject(id=int(object_id), visible_fraction=float(visible_fraction), method=method)
-    T = np.eye(4)
-    T[:3, 3] = centre
-    msg.pose = matrix_to_pose(T)
-    msg.mesh = mesh_to_msg(np.asarray(vertices) - centre, faces)
-    msg.convex_parts = [mesh_to_msg(np.asarray(v) - centre, f) for v, f in map(as_vf, convex_parts_world)]
+    msg.pose = matrix_to_pose(T_world_object)
+    msg.mesh = mesh_to_msg(*_as_vf(mesh_local))
+    msg.convex_parts = [mesh_to_msg(*_as_vf(p)) for p in convex_parts_local]
     if grid is not None:
         msg.grid = grid
     return msg
+
+
+def _as_vf(mesh) -> tuple[np.ndarray, np.ndarray]:
+    return (np.asarray(mesh.vertices), np.asarray(mesh.faces)) if hasattr(mesh, "vertices") else mesh
+
+
+def reconstructed_object_msg(object_id: int, mesh_world, convex_parts_world=(), visible_fraction: float = -1.0,
+                             method: str = "", grid=None):
+    """World-frame meshes -> ReconstructedObject whose object frame is parallel to the world frame with its
+    origin at the mesh's vertex centroid (see the message definition)."""
+    vertices, faces = _as_vf(mesh_world)
+    T = np.eye(4)
+    T[:3, 3] = np.asarray(vertices, dtype=np.float64).mean(axis=0) if len(vertices) else 0.0
+    parts = [(np.asarray(v) - T[:3, 3], f) for v, f in map(_as_vf, convex_parts_world)]
+    return object_msg(object_id, T, (np.asarray(vertices) - T[:3, 3], faces), parts, visible_fraction, method, grid)
 
 
 def reconstructed_object_from_msg(msg) -> tuple[np.ndarray, tuple, list]:
