@@ -201,6 +201,7 @@ def main(argv=None) -> int:
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
     parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
+    parser.add_argument("--rearrange-steps", type=int, default=300, help="rearrange step budget (0: --steps)")
     parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
     parser.add_argument("--nthread", type=int, default=2)
@@ -227,6 +228,7 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.close_steps = args.close_steps
+    config.task_steps = {"rearrange": args.rearrange_steps} if args.rearrange_steps else {}
     done = load_done(log)
     settings = {
         "episodes": n,

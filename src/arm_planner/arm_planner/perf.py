@@ -59,6 +59,7 @@ def _plan(objects, table_height_m, target_id, task, displacement, twin_step_s, s
 
 
 def mppi_step_ms(objects, table_height_m, target_id, twin_step_s=0.01, steps=60) -> tuple[float, object]:
+    """Median wall ms of one MPPI step over a grasp plan (first 5 steps skipped as warm-up)."""
     session, outcome = _plan(objects, table_height_m, target_id, "grasp", (0, 0, 0), twin_step_s, steps)
     if not outcome.planned:
         raise RuntimeError(f"perf plan failed: {outcome.message}")
@@ -181,8 +182,12 @@ def measure(n_objects: int = 10, seed: int = 0) -> dict:
     step_ms, (session, outcome) = mppi_step_ms(objects, scene.table_height_m, target)
     scaling = rollout_scaling(session, outcome)
     session.close()
+    load_before = os.getloadavg()[0]
     figures = {
         "mppi_step_ms": step_ms,
+        "mppi_step_p90_ms": float(np.percentile(outcome.result.step_ms[5:], 90)),
+        "mppi_step_cpu_ms": float(np.median(outcome.result.step_cpu_ms[5:])),
+        "mppi_load_average": load_before,
         "mppi_step_config": "25 paths x horizon 5 x 0.02 s, twin step 0.01 s, 2 threads, "
         f"{len(objects)} objects with <= 8 convex parts, grasp reward",
         "mppi_rollout_scaling": scaling,

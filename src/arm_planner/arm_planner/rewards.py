@@ -112,7 +112,7 @@ class TaskReward:
     def rollout_poses(self, states: np.ndarray, controls: np.ndarray):
         """(target centre, hand poses): the simulated hand and, if blended, the commanded one."""
         qpos = states[..., self.qpos_offset : self.qpos_offset + self.nq]
-        target_pos, _ = self.target(qpos)
+        target_pos, self.target_rot = self.target(qpos)
         hands = [(1.0, *self.hand(qpos))]
         share = self.weights.command
         if share > 0 and self.arm_qpos_adr is not None:
@@ -228,6 +228,14 @@ class PushReward(TaskReward):
     # pushing (so that pressing on, not hovering at the surface, is what the reward pays for).
     contact_gap_m: float = 0.015
     push_gap_m: float = -0.01
+    # The hand leans into the push by this angle (approach axis tilted from straight down towards the
+    # push direction), so the fingertips, not the whole finger, meet the object low at its base: a
+    # vertical finger presses on its full height and tips tall objects over.
+    tilt_rad: float = 0.4
+    contact_height_m: float = 0.018
+    clearance_m: float = 0.012
+    push_goal_weight: float = 10.0
+    upright: float = 1.0
     engage_distance_m: float = 0.02
     disengage_distance_m: float = 0.06
     state: str = "approaching"
@@ -237,7 +245,7 @@ class PushReward(TaskReward):
         self.start_com = g.com_world.copy()
         self.goal = g.com_world + self.goal_displacement
         height = g.top_z - g.bottom_z
-        self.push_z = g.bottom_z + float(np.clip(0.4 * height, 0.015, 0.05))
+        self.push_z = g.bottom_z + float(min(self.contact_height_m, 0.5 * height))
 
     @property
     def gripper_closed(self) -> bool:
@@ -248,12 +256,20 @@ class PushReward(TaskReward):
             raise ValueError(f"cannot resume a push in state {state!r}")
         self.state = state
 
+    def _direction(self, target_pos: np.ndarray) -> np.ndarray:
+        to_goal = self.goal[:2] - target_pos[..., :2]
+        return to_goal / (np.linalg.norm(to_goal, axis=-1, keepdims=True) + 1e-9)
+
+    def _approach_axis(self, target_pos: np.ndarray) -> np.ndarray:
+        direction = self._direction(target_pos) * np.sin(self.tilt_rad)
+        down = np.full(direction.shape[:-1] + (1,), -np.cos(self.tilt_rad))
+        return np.concatenate([direction, down], axis=-1)
+
     def _contact_point(self, target_pos: np.ndarray, gap_m: float | None = None) -> np.ndarray:
         gap_m = self.contact_gap_m if gap_m is None else gap_m
-        to_goal = self.goal[:2] - target_pos[..., :2]
-        direction = to_goal / (np.linalg.norm(to_goal, axis=-1, keepdims=True) + 1e-9)
+        direction = self._direction(target_pos)
         reach = self._support_batch(-direction)
-        xy = target_pos[..., :2] - direction * (reach + gap_m)[..., None]
+        xy = target_pos[..., :2] - direction * (reach + np.asarray(gap_m))[..., None]
         z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
         return np.concatenate([xy, z[..., None]], axis=-1)
 
@@ -265,15 +281,27 @@ class PushReward(TaskReward):
         w = self.weights
         target_pos, hands = self.rollout_poses(states, controls)
         pushing = self.state == "pushing"
-        contact = self._contact_point(target_pos, self.push_gap_m if pushing else self.contact_gap_m)
+        gap = self.contact_gap_m
+        if pushing:  # press while far from the goal, back off to the surface when there
+            near = np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1) < 0.02
+            gap = np.where(near, self.contact_gap_m, self.push_gap_m)
+        contact = self._contact_point(target_pos, gap)
+        axis = self._approach_axis(target_pos)
 
         def score(pos, rot):
-            value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * _angle_down(rot)
+            lean = np.arccos(np.clip(np.einsum("...i,...i->...", rot[..., :, 2], axis), -1.0, 1.0))
+            value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * lean
+            scrape = np.maximum(self.geometry.table_height_m + self.clearance_m - pos[..., 2], 0.0)
+            value = value - w.height * scrape
             return value if pushing else value - w.height * self.funnel_penalty(pos, contact)
 
         reward = self.blend(hands, score)
         if pushing:
-            reward = reward - w.goal * 2.0 * np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1)
+            tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
+            reward = reward - w.goal * self.push_goal_weight * np.linalg.norm(
+                self.goal[:2] - target_pos[..., :2], axis=-1
+            )
+            reward = reward - self.upright * tilt
         return reward
 
     def update(self, state: np.ndarray) -> str:

@@ -14,7 +14,7 @@ from arm_planner.rewards import TargetGeometry
 def _setup(steps=200):
     model = gantry_model()
     model.opt.timestep = 0.01
-    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=2, seed=0))
+    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=1, seed=0))
     config.noise.linear_std_m_s = 0.3
     config.settle_s = 0.1
     planner = Planner(model, GANTRY_SPEC, config)
