@@ -99,3 +99,23 @@ def test_refusals_then_a_plan(graph):
     time.sleep(0.3)
     result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
     assert "invalid" in result.message
+
+
+def test_closed_loop_replanning_executes_in_chunks(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    node.replan_period_s, node.max_replans = 0.04, 2
+    try:
+        before = len(received)
+        result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    finally:
+        node.replan_period_s = 0.0
+    assert result.trajectory.points, result.message
+    deadline = time.monotonic() + 5
+    while len(received) - before < 3:
+        assert time.monotonic() < deadline, "expected one trajectory per chunk"
+        time.sleep(0.05)
+    chunks = received[before:]
+    assert [len(c.points) for c in chunks[:2]] == [2, 2]
+    assert len(result.trajectory.points) == sum(len(c.points) for c in chunks)
