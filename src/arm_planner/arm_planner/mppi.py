@@ -133,6 +133,11 @@ class BatchedRollout:
         )
         return out[:, self.substeps - 1 :: self.substeps]
 
+    def reset_data(self) -> None:
+        """Reset the per-thread data (re-applies the sleep policy: INIT trees start asleep)."""
+        for data in self._datas:
+            mujoco.mj_resetData(self.model, data)
+
     def close(self) -> None:
         self._runner.close()
 

@@ -119,9 +119,25 @@ class Planner:
         self.hand = BodyKinematics(model, self.robot.tcp_body, np.asarray(robot.tcp_offset_m))
         self._data = mujoco.MjData(model)
         self._object_trees = free_body_trees(model)
+        free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        self._object_qpos = np.array([model.jnt_qposadr[j] + k for j in free for k in range(7)], dtype=int)
+        self._object_dofs = np.array([model.jnt_dofadr[j] + k for j in free for k in range(6)], dtype=int)
 
     def close(self) -> None:
         self.mppi.close()
+
+    def _stop_creeping(self, data: mujoco.MjData) -> None:
+        """Zero the velocity of objects creeping slower than 2 cm/s and 0.2 rad/s (contact jitter).
+
+        Applied once, after the twin settled: such an object would otherwise stay awake and wake
+        every object it touches in every rollout; at rest it sleeps until something pushes it.
+        """
+        if len(self._object_dofs) == 0:
+            return
+        qvel = data.qvel[self._object_dofs].reshape(-1, 6)
+        creeping = (np.linalg.norm(qvel[:, :3], axis=1) < 0.02) & (np.linalg.norm(qvel[:, 3:], axis=1) < 0.2)
+        qvel[creeping] = 0.0
+        data.qvel[self._object_dofs] = qvel.reshape(-1)
 
     def _reward(self, request: PlanRequest, geometry: TargetGeometry):
         target_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, request.target_body)
@@ -207,7 +223,12 @@ class Planner:
         mujoco.mj_step(model, data, nstep=int(round(cfg.settle_s / model.opt.timestep)))
         data.time = 0.0
         if cfg.sleep_objects:
+            # Rollout data start with the objects asleep in their settled configuration: MuJoCo
+            # initialises sleeping islands at qpos0, so qpos0 takes the settled object poses.
+            model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
+            self._stop_creeping(data)
             set_sleep(model, self._object_trees, start_asleep=True)
+            self.mppi.rollout.reset_data()
         mujoco.mj_forward(model, data)
         self.mppi.reset()
         controls, states, step_ms, step_cpu_ms = [], [], [], []
