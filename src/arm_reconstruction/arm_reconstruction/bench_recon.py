@@ -412,9 +412,12 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
             row["methods"][name] = {
                 "empty": False,
                 "chamfer_m": chamfer_distance_m(mesh, truths[truth_id], config.chamfer_samples),
-                "iou": volumetric_iou(mesh, truths[truth_id], config.iou_resolution),
                 "displacement_m": moved.get(obj.id),
             }
+            try:
+                row["methods"][name]["iou"] = volumetric_iou(mesh, truths[truth_id], config.iou_resolution)
+            except ValueError as error:  # an open reconstructed surface has no defined inside
+                row["methods"][name] |= {"iou": None, "iou_error": str(error)}
             kept_meshes[truth_id][name] = mesh
         timing[name] = {"reconstruct_s": reconstruct_s, "total_s": time.perf_counter() - tick}
     if GROUND_TRUTH in config.methods:
@@ -521,10 +524,10 @@ def _stats(entries: list[dict], threshold_m: float, geometric: bool) -> dict:
     out = {"n": len(entries), "n_empty": sum(e["empty"] for e in entries)}
     if geometric:
         chamfer = [e["chamfer_m"] for e in entries if e["chamfer_m"] is not None]
-        iou = [e["iou"] for e in entries]
+        iou = [e["iou"] for e in entries if e["iou"] is not None]
         out |= {"chamfer_m": _mean(chamfer), "chamfer_m_median": float(np.median(chamfer)) if chamfer else None,
                 "chamfer_m_ci90": bootstrap_ci(chamfer), "n_chamfer": len(chamfer), "iou": _mean(iou),
-                "iou_ci90": bootstrap_ci(iou)}
+                "iou_ci90": bootstrap_ci(iou), "n_iou_undefined": len(entries) - len(iou)}
     else:
         out |= {"chamfer_m": None, "iou": None}
     out |= {"stable_fraction": stable / len(entries) if entries else None, "stable_ci90": wilson(stable, len(entries)),

@@ -6,7 +6,7 @@ d(p, Q) the Euclidean distance from p to its nearest point of Q,
     CD = 0.5 * ( mean_{a in A} d(a, B) + mean_{b in B} d(b, A) )      [metres],
 the symmetric mean of the two mean nearest-neighbour distances (not squared).
 
-Volumetric IoU (volumetric_iou): both watertight meshes are voxelized (voxel centres inside, ray
+Volumetric IoU (volumetric_iou): both closed meshes are voxelized (voxel centres inside, ray
 parity, arm_reconstruction.grid.voxelize_mesh) in one cubic grid that encloses both meshes with a
 one-voxel margin, |A and B| / |A or B|.
 """
@@ -62,6 +62,15 @@ def chamfer_distance_m(
     return float(0.5 * (a_to_b + b_to_a))
 
 
+def is_closed(mesh: trimesh.Trimesh) -> bool:
+    """Every edge is shared by an even number of faces: the inside is defined by ray parity (also for
+    surfaces that touch themselves along an edge, which trimesh does not call watertight)."""
+    if len(mesh.faces) == 0:
+        return False
+    _, counts = np.unique(np.asarray(mesh.edges_sorted), axis=0, return_counts=True)
+    return bool(np.all(counts % 2 == 0))
+
+
 def enclosing_grid(meshes, resolution: int = DEFAULT_IOU_RESOLUTION) -> GridFrame:
     """Cubic GridFrame of resolution^3 voxels enclosing every non-empty mesh with one voxel to spare."""
     bounds = [np.asarray(m.bounds) for m in meshes if len(m.faces)]
@@ -83,10 +92,10 @@ def volumetric_iou(
 ) -> float:
     """Intersection over union of the voxels whose centres lie inside each mesh, in `frame` (default:
     the cubic grid enclosing both). An empty mesh occupies nothing (IoU 0 against a non-empty one).
-    Raises ValueError when a non-empty mesh is not watertight or when both are empty."""
+    Raises ValueError when a non-empty mesh is not closed or when both are empty."""
     for name, mesh in (("mesh_a", mesh_a), ("mesh_b", mesh_b)):
-        if len(mesh.faces) and not mesh.is_watertight:
-            raise ValueError(f"{name} is not watertight: its inside is undefined")
+        if len(mesh.faces) and not is_closed(mesh):
+            raise ValueError(f"{name} is not a closed surface: its inside is undefined")
     if not len(mesh_a.faces) and not len(mesh_b.faces):
         raise ValueError("both meshes are empty")
     if resolution < 8:

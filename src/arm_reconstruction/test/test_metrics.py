@@ -6,6 +6,7 @@ from arm_reconstruction.grid import GridFrame
 from arm_reconstruction.metrics import (
     chamfer_distance_m,
     enclosing_grid,
+    is_closed,
     sample_surface_points,
     volumetric_iou,
 )
@@ -61,6 +62,14 @@ def test_volumetric_iou_of_overlapping_boxes():
     assert volumetric_iou(a, trimesh.Trimesh()) == 0.0
 
 
+def test_surfaces_touching_along_an_edge_are_closed_and_measured():
+    a = box((0.1, 0.1, 0.1), (0.05, 0.05, 0.05))
+    b = box((0.1, 0.1, 0.1), (0.15, 0.15, 0.05))
+    touching = trimesh.Trimesh(np.vstack([a.vertices, b.vertices]), np.vstack([a.faces, b.faces + 8]), process=True)
+    assert not touching.is_watertight and is_closed(touching) and len(touching.vertices) == 14
+    assert volumetric_iou(touching, a, resolution=64) == pytest.approx(0.5, abs=0.03)
+
+
 def test_volumetric_iou_in_a_given_frame_and_errors():
     a = box((0.1, 0.1, 0.1), (0.05, 0.05, 0.05))
     frame = GridFrame(np.zeros(3), 0.2 / 32, 32, 0.0)
@@ -69,7 +78,7 @@ def test_volumetric_iou_in_a_given_frame_and_errors():
     assert enclosing.side_m > 0.55
     open_mesh = box((0.1, 0.1, 0.1))
     open_mesh.update_faces(np.arange(len(open_mesh.faces)) > 0)
-    with pytest.raises(ValueError, match="watertight"):
+    with pytest.raises(ValueError, match="not a closed surface"):
         volumetric_iou(a, open_mesh)
     with pytest.raises(ValueError, match="both meshes are empty"):
         volumetric_iou(trimesh.Trimesh(), trimesh.Trimesh())
