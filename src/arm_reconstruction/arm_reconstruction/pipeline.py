@@ -139,13 +139,13 @@ def _object_pose(mesh: trimesh.Trimesh) -> np.ndarray:
     return T
 
 
-def estimate_visible_fraction(mesh_world, labels, object_id, K, T_world_camera) -> float:
-    """Visible pixels of the object over the pixels its reconstructed mesh covers alone (clipped to 1;
-    -1 when the mesh projects to no pixel)."""
+def estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera) -> float:
+    """Visible pixels of the object over the pixels its reconstruction (convex parts, (N, 3) world vertex
+    arrays) covers alone (clipped to 1; -1 when it projects to no pixel)."""
     from arm_sim.camera import silhouette
 
     height, width = labels.shape
-    alone = silhouette(mesh_world.vertices, mesh_world.faces, K, T_world_camera, width, height).sum()
+    alone = silhouette(parts_world, K, T_world_camera, width, height).sum()
     if alone == 0:
         return -1.0
     return float(min(1.0, np.count_nonzero(labels == object_id) / alone))
@@ -251,7 +251,8 @@ class Reconstructor:
             visible = -1.0
             if s.estimate_visibility:
                 with self.timer("visibility"):
-                    visible = estimate_visible_fraction(mesh, labels, object_id, K, T_world_camera)
+                    parts_world = [p.vertices + T_world_object[:3, 3] for p in parts] or [mesh.vertices]
+                    visible = estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera)
             kept = probabilities[n] if s.keep_probabilities else None
             objects[object_id] = ReconstructedObject(
                 object_id, T_world_object, local, parts, visible, frame, s.method, "", kept

@@ -77,16 +77,38 @@ def project_points(points_world: np.ndarray, K: np.ndarray, T_world_camera: np.n
     return uv, z
 
 
-def silhouette(vertices_world, faces, K, T_world_camera, width: int, height: int, near_m: float = 0.01):
-    """Boolean mask of the pixels a mesh covers when rendered alone (one vectorised fillPoly)."""
-    uv, z = project_points(np.asarray(vertices_world), K, T_world_camera)
-    faces = np.asarray(faces)
-    in_front = np.all(z[faces] > near_m, axis=1)
-    triangles = np.round(uv[faces[in_front]] * 16).astype(np.int32)
-    mask = np.zeros((height, width), np.uint8)
-    if len(triangles):
-        cv2.fillPoly(mask, list(triangles), 1, lineType=cv2.LINE_8, shift=4)
-    return mask.astype(bool)
+def fill_convex_hull(mask: np.ndarray, points_px: np.ndarray) -> None:
+    """Set the pixels of mask whose centres lie inside the 2D convex hull of points_px (N, 2) (image
+    coordinates of project_points: pixel (row v, column u) has its centre at (u + 0.5, v + 0.5)),
+    which reproduces MuJoCo's rendered silhouettes."""
+    if len(points_px) < 3:
+        return
+    hull = cv2.convexHull(np.asarray(points_px, np.float32)).reshape(-1, 2).astype(np.float64)
+    if len(hull) < 3:
+        return
+    height, width = mask.shape
+    lo = np.maximum(np.ceil(hull.min(0) - 0.5), 0).astype(np.int64)
+    hi = np.minimum(np.floor(hull.max(0) - 0.5), [width - 1, height - 1]).astype(np.int64)
+    if np.any(hi < lo):
+        return
+    u, v = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
+    edges = np.roll(hull, -1, axis=0) - hull
+    pu, pv = u.reshape(-1, 1) + 0.5, v.reshape(-1, 1) + 0.5
+    cross = edges[:, 0] * (pv - hull[:, 1]) - edges[:, 1] * (pu - hull[:, 0])
+    area = np.sum(hull[:, 0] * np.roll(hull[:, 1], -1) - np.roll(hull[:, 0], -1) * hull[:, 1])
+    inside = np.all(cross * np.sign(area) >= 0, axis=1)
+    mask[v.ravel()[inside], u.ravel()[inside]] = True
+
+
+def silhouette(convex_parts_world, K, T_world_camera, width: int, height: int, near_m: float = 0.01) -> np.ndarray:
+    """Boolean mask of the pixels an object covers when rendered alone: the union of the projections
+    of its convex parts (each projects to the convex hull of its projected vertices), given as a list
+    of (N, 3) world-frame vertex arrays."""
+    mask = np.zeros((height, width), bool)
+    for vertices in convex_parts_world:
+        uv, z = project_points(np.asarray(vertices, dtype=np.float64), K, T_world_camera)
+        fill_convex_hull(mask, np.clip(uv[z > near_m], -1e5, 1e5))
+    return mask
 
 
 def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:

@@ -181,12 +181,13 @@ class SimWorld:
         return RgbdFrame(rgb, depth, labels, self.K.copy(), np.array(T_world_camera, float), visible, stamp_s)
 
     def visible_fractions(self, labels: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
+        """Visible pixels over the pixels each object covers when rendered alone (its convex parts,
+        which are exactly what MuJoCo renders)."""
         counts = np.bincount(labels.ravel(), minlength=len(self.object_ids) + 1)[1:]
         fractions = np.zeros(len(self.object_ids))
         for i, (placed, T) in enumerate(zip(self.scene.objects, self.object_poses(), strict=True)):
-            mesh = placed.model.mesh
-            vertices = (mesh.vertices * placed.scale) @ T[:3, :3].T + T[:3, 3]
-            alone = silhouette(vertices, mesh.faces, self.K, T_world_camera, self.width, self.height).sum()
+            parts = [vertices @ T[:3, :3].T + T[:3, 3] for vertices, _ in placed.convex_parts_local()]
+            alone = silhouette(parts, self.K, T_world_camera, self.width, self.height).sum()
             fractions[i] = min(1.0, counts[i] / alone) if alone > 0 else 0.0
         return fractions
 

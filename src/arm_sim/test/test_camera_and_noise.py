@@ -31,13 +31,22 @@ def test_sampled_camera_poses_follow_the_benchmark_shell():
         assert 0.125 - 1e-9 <= distance <= 1.5 + 1e-9 and T[2, 3] > 0
 
 
-def test_silhouette_covers_the_projected_square():
-    K = intrinsics(640, 480, 45.0)
-    T = look_at((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), up=(0, 1, 0))
-    vertices = np.array([[-0.1, -0.1, 0], [0.1, -0.1, 0], [0.1, 0.1, 0], [-0.1, 0.1, 0]])
-    mask = silhouette(vertices, np.array([[0, 1, 2], [0, 2, 3]]), K, T, 640, 480)
-    side_px = 0.2 * K[0, 0]
-    assert abs(mask.sum() - side_px**2) / side_px**2 < 0.03
+def test_silhouette_of_a_closed_box_matches_mujocos_rendering():
+    from arm_sim.objects import ObjectModel, box
+    from arm_sim.scenes import PlacedObject, Scene
+    from arm_sim.world import SimWorld
+
+    part = box((0.1, 0.06, 0.08), (0.0, 0.0, 0.04))
+    T = np.eye(4)
+    T[:3, 3] = (0.05, 0.02, 0.0)
+    scene = Scene([PlacedObject(ObjectModel("box", "box", part, [part]), 1.0, T)])
+    world = SimWorld(scene, robot_arm=False)
+    camera = look_at((0.5, 0.3, 0.4), (0.0, 0.0, 0.0))
+    frame = world.render(camera)
+    rendered = frame.labels == 1
+    predicted = silhouette([part.vertices + T[:3, 3]], world.K, camera, 640, 480)
+    overlap = (rendered & predicted).sum() / (rendered | predicted).sum()
+    assert overlap > 0.97 and frame.visible_fraction[0] > 0.97
 
 
 def test_depth_noise_grows_with_distance_and_drops_edges():
