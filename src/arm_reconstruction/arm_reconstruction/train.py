@@ -56,7 +56,7 @@ class TrainConfig:
     pos_weight: float = 1.0
     surface_weight: float = 1.0
     stability_weight: float = 1e-3
-    connectivity_weight: float = 1e-2
+    connectivity_weight: float = 1e-4  # 1e-2 diverged here: its detour term inflated the shapes
     connectivity_factor: int = 2
     connectivity_endpoints: int = 16
     base_channels: int = 16  # on the shared 2-core CPU 16 trained ~2.3x faster per step than 32
