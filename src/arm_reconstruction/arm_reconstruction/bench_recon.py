@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -41,7 +42,7 @@ import trimesh
 from tqdm import tqdm
 
 from .checkpoint import CheckpointError
-from .convex_parts import ConvexDecomposer
+from .convex_parts import ConvexDecomposer, DecompositionSettings
 from .grid import DEFAULT_RESOLUTION
 from .metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION, chamfer_distance_m, volumetric_iou
 from .network import METHODS
@@ -365,6 +366,41 @@ def _qualitative_payload(scene, frame, object_id: int, meshes: dict) -> dict:
     return payload
 
 
+def _score_method(reconstructor, grids, labels, frame, truths: dict, match: dict, table, config) -> tuple:
+    """One method on one view -> ({truth id: metrics}, {truth id: reconstructed world mesh})."""
+    objects = reconstructor.build_objects(grids, reconstructor.predict(grids), labels, frame.K, frame.T_world_camera)
+    built = {o.id: o for o in objects if o.ok}
+    twins = [_twin_object(o.id, o.T_world_object, o.mesh, o.convex_parts) for o in built.values()]
+    moved = scene_stability(twins, *table, config.settle_s, config.physics_timestep_s)
+    entries, meshes = {}, {}
+    for truth_id, truth in truths.items():
+        obj = built.get(match.get(truth_id, -1))
+        if obj is None:
+            entries[truth_id] = {"empty": True, "chamfer_m": None, "iou": 0.0, "displacement_m": None}
+            continue
+        mesh = meshes[truth_id] = obj.world_mesh()
+        entry = entries[truth_id] = {
+            "empty": False,
+            "chamfer_m": chamfer_distance_m(mesh, truth, config.chamfer_samples),
+            "displacement_m": moved.get(obj.id),
+        }
+        try:
+            entry["iou"] = volumetric_iou(mesh, truth, config.iou_resolution)
+        except ValueError as error:  # an open reconstructed surface has no defined inside
+            entry |= {"iou": None, "iou_error": str(error)}
+    return entries, meshes
+
+
+def _score_ground_truth(scene, truth_ids, decomposition: DecompositionSettings, table, config) -> dict:
+    """Displacements of the true meshes through the pipeline's decomposition, and with the simulator's parts."""
+    run_physics = functools.partial(scene_stability, table_height_m=table[0], table_half_extent_m=table[1],
+                                    duration_s=config.settle_s, timestep_s=config.physics_timestep_s)
+    moved = run_physics(ground_truth_objects(scene, truth_ids, ConvexDecomposer(decomposition)))
+    moved_sim_parts = run_physics(simulator_part_objects(scene, truth_ids))
+    return {i: {"empty": False, "chamfer_m": None, "iou": None, "displacement_m": moved.get(i),
+                "displacement_sim_parts_m": moved_sim_parts.get(i)} for i in truth_ids}
+
+
 def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) -> tuple[dict, dict]:
     """Per-object metrics of every method on scene `index` -> (JSON-able result, qualitative arrays)."""
     start, start_cpu = time.perf_counter(), time.process_time()
@@ -379,72 +415,47 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
     else:
         labels, match, reconstruct_ids = frame.labels, {i: i for i in truth_ids}, truth_ids
     truths = {i: scene.objects[i - 1].world_mesh() for i in truth_ids}
-    rows = [
-        {
+    rows = {
+        i: {
             "scene": index, "object": i - 1, "category": scene.objects[i - 1].model.category,
             "scale": float(scene.objects[i - 1].scale), "visible_fraction": float(visible[i - 1]),
             "visible_pixels": int(np.count_nonzero((frame.labels == i) & (frame.depth_m > 0))),
             "matched": i in match, "methods": {},
         }
         for i in truth_ids
-    ]
+    }
     table = (scene.table_height_m, scene.table_half_extent_m)
-    timing, grids_cache, kept_meshes = {}, {}, {i: {GROUND_TRUTH: truths[i]} for i in truth_ids}
+    timing, grids_cache, kept = {}, {}, {i: {GROUND_TRUTH: truths[i]} for i in truth_ids}
     for name, reconstructor in reconstructors.items():
         tick = time.perf_counter()
         reconstructor.timer.reset()
         key = (reconstructor.resolution, reconstructor.settings.k, reconstructor.settings.table_height_m)
-        K, T_world_camera = frame.K, frame.T_world_camera
         if key not in grids_cache:
-            grids_cache[key] = reconstructor.grids(frame.depth_m, K, T_world_camera, labels, reconstruct_ids)
-        grids = grids_cache[key]
-        objects = reconstructor.build_objects(grids, reconstructor.predict(grids), labels, K, T_world_camera)
-        reconstruct_s = time.perf_counter() - tick
-        built = {o.id: o for o in objects if o.ok}
-        twins = [_twin_object(o.id, o.T_world_object, o.mesh, o.convex_parts) for o in built.values()]
-        moved = scene_stability(twins, *table, config.settle_s, config.physics_timestep_s)
-        for row, truth_id in zip(rows, truth_ids, strict=True):
-            obj = built.get(match.get(truth_id, -1))
-            if obj is None:
-                row["methods"][name] = {"empty": True, "chamfer_m": None, "iou": 0.0, "displacement_m": None}
-                continue
-            mesh = obj.world_mesh()
-            row["methods"][name] = {
-                "empty": False,
-                "chamfer_m": chamfer_distance_m(mesh, truths[truth_id], config.chamfer_samples),
-                "displacement_m": moved.get(obj.id),
-            }
-            try:
-                row["methods"][name]["iou"] = volumetric_iou(mesh, truths[truth_id], config.iou_resolution)
-            except ValueError as error:  # an open reconstructed surface has no defined inside
-                row["methods"][name] |= {"iou": None, "iou_error": str(error)}
-            kept_meshes[truth_id][name] = mesh
-        timing[name] = {"reconstruct_s": reconstruct_s, "total_s": time.perf_counter() - tick}
+            grids_cache[key] = reconstructor.grids(frame.depth_m, frame.K, frame.T_world_camera, labels,
+                                                   reconstruct_ids)
+        entries, meshes = _score_method(reconstructor, grids_cache[key], labels, frame, truths, match, table, config)
+        for i in truth_ids:
+            rows[i]["methods"][name] = entries[i]
+            if i in meshes:
+                kept[i][name] = meshes[i]
+        timing[name] = {"total_s": time.perf_counter() - tick}
     if GROUND_TRUTH in config.methods:
         tick = time.perf_counter()
-        decomposer = ConvexDecomposer(next(iter(reconstructors.values())).settings.decomposition) if reconstructors \
-            else ConvexDecomposer()
-        moved = scene_stability(ground_truth_objects(scene, truth_ids, decomposer), *table, config.settle_s,
-                                config.physics_timestep_s)
-        moved_sim_parts = scene_stability(simulator_part_objects(scene, truth_ids), *table, config.settle_s,
-                                          config.physics_timestep_s)
-        for row, truth_id in zip(rows, truth_ids, strict=True):
-            row["methods"][GROUND_TRUTH] = {"empty": False, "chamfer_m": None, "iou": None,
-                                            "displacement_m": moved.get(truth_id),
-                                            "displacement_sim_parts_m": moved_sim_parts.get(truth_id)}
+        decomposition = next((r.settings.decomposition for r in reconstructors.values()), DecompositionSettings())
+        for i, entry in _score_ground_truth(scene, truth_ids, decomposition, table, config).items():
+            rows[i]["methods"][GROUND_TRUTH] = entry
         timing[GROUND_TRUTH] = {"total_s": time.perf_counter() - tick}
     qualitative = {}
-    hard = sorted((r["visible_fraction"], r["object"] + 1) for r in rows
-                  if r["visible_fraction"] < QUALITATIVE_MAX_VISIBILITY
-                  and all(m in kept_meshes[r["object"] + 1] for m in ("baseline", "arm")))
-    for n, (_, truth_id) in enumerate(hard[:QUALITATIVE_PER_SCENE]):
-        meshes = {m: kept_meshes[truth_id][m] for m in ("baseline", "arm", GROUND_TRUTH)}
-        for key, value in _qualitative_payload(scene, frame, truth_id, meshes).items():
+    hard = sorted((rows[i]["visible_fraction"], i) for i in truth_ids
+                  if rows[i]["visible_fraction"] < QUALITATIVE_MAX_VISIBILITY and {"baseline", "arm"} <= set(kept[i]))
+    for n, (_, i) in enumerate(hard[:QUALITATIVE_PER_SCENE]):
+        meshes = {m: kept[i][m] for m in ("baseline", "arm", GROUND_TRUTH)}
+        for key, value in _qualitative_payload(scene, frame, i, meshes).items():
             qualitative[f"{n}/{key}"] = value
-        qualitative[f"{n}/object"] = np.int64(truth_id - 1)
+        qualitative[f"{n}/object"] = np.int64(i - 1)
     result = {
         "scene": index, "objects_in_scene": len(scene.objects), "objects_evaluated": len(rows),
-        "segments_reconstructed": len(reconstruct_ids), "rows": rows, "timing_s": timing,
+        "segments_reconstructed": len(reconstruct_ids), "rows": list(rows.values()), "timing_s": timing,
         "wall_s": time.perf_counter() - start, "cpu_s": time.process_time() - start_cpu,
     }
     return result, qualitative

@@ -164,3 +164,60 @@ def test_visible_fractions_count_what_the_renderer_shows():
     alone = bench_recon.object_silhouette(objects[0], frame.K, frame.T_world_camera, frame.labels.shape)
     assert visible[1] == 1.0 and 0.2 < visible[0] < 0.8, "the wall hides part of the block"
     assert np.count_nonzero((frame.labels == 1) & ~alone) == 0, "visible pixels lie inside the silhouette"
+
+
+def synthetic_results():
+    """Two objects: arm halves baseline's Chamfer; one arm object and the baseline ones move."""
+    def entry(chamfer, moved):
+        return {"empty": chamfer is None, "chamfer_m": chamfer, "iou": 0.0 if chamfer is None else 0.5,
+                "displacement_m": moved}
+
+    rows = [
+        {"scene": 0, "object": 0, "category": "vase", "visible_fraction": 0.1, "matched": True,
+         "methods": {"baseline": entry(0.02, 0.05), "arm": entry(0.01, 0.001),
+                     "ground-truth": {**entry(None, 0.0), "empty": False, "iou": None}}},
+        {"scene": 0, "object": 1, "category": "lamp", "visible_fraction": 0.9, "matched": True,
+         "methods": {"baseline": entry(0.004, 0.02), "arm": entry(0.002, 0.03),
+                     "ground-truth": {**entry(None, 0.002), "empty": False, "iou": None}}},
+    ]
+    timing = {m: {"total_s": 1.0} for m in ("baseline", "arm", "ground-truth")}
+    return [{"scene": 0, "rows": rows, "timing_s": timing, "wall_s": 3.0, "cpu_s": 2.0}]
+
+
+def test_summary_and_targets_follow_the_measurements():
+    config = BenchConfig(methods=("baseline", "arm", "arm-c", "ground-truth"))
+    summary = bench_recon.summarise(synthetic_results(), config, {"arm-c": "no checkpoint"}, {})
+    methods = summary["methods"]
+    assert methods["arm-c"] == {"status": "skipped", "reason": "no checkpoint"}
+    assert methods["arm"]["chamfer_m"] == pytest.approx(0.006)
+    assert methods["baseline"]["chamfer_m"] == pytest.approx(0.012)
+    assert methods["arm"]["stable_fraction"] == 0.5 and methods["ground-truth"]["stable_fraction"] == 1.0
+    low_bin = methods["arm"]["by_visibility"]["0.0-0.2"]
+    assert low_bin["n"] == 1 and low_bin["chamfer_m"] == pytest.approx(0.01) and low_bin["stable_fraction"] == 1.0
+    assert methods["arm"]["by_visibility"]["0.4-0.6"]["n"] == 0
+    targets = summary["targets"]
+    assert targets["arm_chamfer_reduction_vs_baseline"]["value"] == pytest.approx(0.5)
+    assert targets["arm_chamfer_reduction_vs_baseline"]["met"]
+    assert targets["arm_lower_chamfer_every_bin_below_0.6"]["value"] == {"0.0-0.2": True, "0.2-0.4": None,
+                                                                        "0.4-0.6": None}
+    assert not targets["arm_lower_chamfer_every_bin_below_0.6"]["met"], "bins without objects are not met"
+    assert not targets["arm_stable_fraction"]["met"]
+    assert targets["arm_stable_gap_to_ground_truth"]["value"] == pytest.approx(0.5)
+
+
+def test_plots_and_report_are_written(tmp_path):
+    config = BenchConfig(methods=("baseline", "arm", "ground-truth"))
+    summary = bench_recon.summarise(synthetic_results(), config, {}, {})
+    bench_recon.plot_by_visibility(summary, tmp_path / "a.png")
+    bench_recon.plot_stability(summary, tmp_path / "b.png")
+    box = trimesh.creation.box(extents=(0.05, 0.05, 0.1))
+    case = {"rgb": np.zeros((40, 40, 3), np.uint8), "visible": np.eye(40, dtype=bool),
+            "silhouette": np.ones((40, 40), bool), "camera_eye": np.array([1.0, 0.0, 0.5]), "category": "vase",
+            "visible_fraction": 0.1, "arm_chamfer_m": 0.004}
+    for name in ("baseline", "arm", "ground-truth"):
+        case[name] = (box.vertices, box.faces)
+    bench_recon.plot_qualitative([case], tmp_path / "c.png")
+    bench_recon.write_report(summary, tmp_path / "report.md", ["a.png"])
+    assert all((tmp_path / f).stat().st_size > 1000 for f in ("a.png", "b.png", "c.png"))
+    report = (tmp_path / "report.md").read_text()
+    assert "| arm | 2 | 0 | 6.00" in report and "| 0.0-0.2 | 1 | 20.00 | 10.00 | 50.0% |" in report
