@@ -154,69 +154,23 @@ def load_reconstructors(methods, checkpoint_dir: str = "") -> tuple[dict, dict, 
     return reconstructors, skipped, checkpoints
 
 
-def _fill_convex(mask: np.ndarray, points_px: np.ndarray) -> None:
-    """Set the pixels whose centres lie inside the 2D convex hull of points_px (N, 2), image
-    coordinates of arm_sim.camera.project_points: pixel (row v, column u) has its centre at
-    (u + 0.5, v + 0.5) there, which reproduces MuJoCo's rendered silhouettes pixel for pixel."""
-    import cv2
-
-    if len(points_px) < 3:
-        return
-    hull = cv2.convexHull(np.asarray(points_px, np.float32)).reshape(-1, 2).astype(np.float64)
-    if len(hull) < 3:
-        return
-    height, width = mask.shape
-    lo = np.maximum(np.ceil(hull.min(0) - 0.5), 0).astype(np.int64)
-    hi = np.minimum(np.floor(hull.max(0) - 0.5), [width - 1, height - 1]).astype(np.int64)
-    if np.any(hi < lo):
-        return
-    u, v = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
-    edges = np.roll(hull, -1, axis=0) - hull
-    pu, pv = u.reshape(-1, 1) + 0.5, v.reshape(-1, 1) + 0.5
-    cross = edges[:, 0] * (pv - hull[:, 1]) - edges[:, 1] * (pu - hull[:, 0])
-    area = np.sum(hull[:, 0] * np.roll(hull[:, 1], -1) - np.roll(hull[:, 0], -1) * hull[:, 1])
-    inside = np.all(cross * np.sign(area) >= 0, axis=1)
-    mask[v.ravel()[inside], u.ravel()[inside]] = True
-
-
-def object_silhouette(placed, K, T_world_camera, shape, near_m: float = 0.01) -> np.ndarray:
-    """bool image of the pixels a placed object covers when rendered alone (union of its convex parts)."""
-    from arm_sim.camera import project_points
+def object_silhouette(placed, K, T_world_camera, shape) -> np.ndarray:
+    """bool image of the pixels a placed object covers when rendered alone (its convex parts)."""
+    from arm_sim.camera import silhouette
 
     T = np.asarray(placed.T_world_object, dtype=np.float64)
-    mask = np.zeros(shape, bool)
-    for vertices, _ in placed.convex_parts_local():
-        uv, z = project_points(np.asarray(vertices) @ T[:3, :3].T + T[:3, 3], K, T_world_camera)
-        _fill_convex(mask, np.clip(uv[z > near_m], -1e5, 1e5))
-    return mask
+    parts = [np.asarray(vertices) @ T[:3, :3].T + T[:3, 3] for vertices, _ in placed.convex_parts_local()]
+    return silhouette(parts, K, T_world_camera, shape[1], shape[0])
 
 
-def visible_fractions(scene, frame, near_m: float = 0.01) -> np.ndarray:
-    """Per object: pixels labelled with it over the pixels it covers when rendered alone
-    (object_silhouette: the simulator renders exactly its convex parts).
-
-    Computed here because arm_sim's silhouette() fills all triangles in one cv2.fillPoly call, whose
-    even-odd rule cancels overlapping front and back faces and undercounts the silhouette (for a box
-    about 1100 of 7400 px), so SimWorld's visible_fraction is clipped to 1 too often."""
-    labels = np.asarray(frame.labels)
-    n = len(scene.objects)
-    counts = np.bincount(labels.ravel().astype(np.int64), minlength=n + 1)[1:n + 1]
-    fractions = np.zeros(n)
-    for i, placed in enumerate(scene.objects):
-        alone = int(np.count_nonzero(object_silhouette(placed, frame.K, frame.T_world_camera, labels.shape, near_m)))
-        fractions[i] = min(1.0, counts[i] / alone) if alone else 0.0
-    return fractions
-
-
-def _occlusion_score(frame, visible: np.ndarray, min_pixels: int) -> tuple[int, int]:
+def _occlusion_score(frame, min_pixels: int) -> tuple[int, int]:
     ids = np.asarray(evaluated_ids(frame.labels, frame.depth_m, min_pixels), dtype=np.int64)
-    occluded = int(np.count_nonzero(visible[ids - 1] < OCCLUDED_VISIBILITY)) if len(ids) else 0
+    occluded = int(np.count_nonzero(frame.visible_fraction[ids - 1] < OCCLUDED_VISIBILITY)) if len(ids) else 0
     return occluded, len(ids)
 
 
 def render_scene(index: int, config: BenchConfig, pool):
-    """(scene, frame, visible fractions) of scene `index` (deterministic in seed and index) and its
-    view: view 'random' takes the first
+    """Scene `index` (deterministic in seed and index) and its view: view 'random' takes the first
     random view that shows an object to evaluate; 'occluded' renders view_candidates such views and
     keeps the one with the most evaluated objects below OCCLUDED_VISIBILITY visible (then the most
     evaluated objects), to populate the low-visibility bins."""
@@ -235,19 +189,18 @@ def render_scene(index: int, config: BenchConfig, pool):
     try:
         for _ in range(MAX_VIEW_TRIES * wanted):
             camera = sample_camera_pose(rng, scene.table_centre)
-            frame = world.render(camera, DepthNoise(enabled=config.depth_noise), rng, with_visibility=False)
-            visible = visible_fractions(scene, frame)
-            score = _occlusion_score(frame, visible, config.min_visible_pixels)
+            frame = world.render(camera, DepthNoise(enabled=config.depth_noise), rng)
+            score = _occlusion_score(frame, config.min_visible_pixels)
             if score[1] == 0:
                 continue
             if score > best_score:
-                best, best_score = (frame, visible), score
+                best, best_score = frame, score
             found += 1
             if found == wanted:
                 break
     finally:
         world.close()
-    return (scene, *best) if best is not None else (scene, frame, visible)
+    return scene, best if best is not None else frame
 
 
 def evaluated_ids(labels, depth_m, min_pixels: int) -> list[int]:
@@ -404,7 +357,7 @@ def _score_ground_truth(scene, truth_ids, decomposition: DecompositionSettings, 
 def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) -> tuple[dict, dict]:
     """Per-object metrics of every method on scene `index` -> (JSON-able result, qualitative arrays)."""
     start, start_cpu = time.perf_counter(), time.process_time()
-    scene, frame, visible = render_scene(index, config, pool)
+    scene, frame = render_scene(index, config, pool)
     truth_ids = evaluated_ids(frame.labels, frame.depth_m, config.min_visible_pixels)
     if config.segmentation == "predicted":
         from arm_segmentation.segmentation import segment
@@ -418,7 +371,7 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
     rows = {
         i: {
             "scene": index, "object": i - 1, "category": scene.objects[i - 1].model.category,
-            "scale": float(scene.objects[i - 1].scale), "visible_fraction": float(visible[i - 1]),
+            "scale": float(scene.objects[i - 1].scale), "visible_fraction": float(frame.visible_fraction[i - 1]),
             "visible_pixels": int(np.count_nonzero((frame.labels == i) & (frame.depth_m > 0))),
             "matched": i in match, "methods": {},
         }

@@ -145,27 +145,6 @@ def test_visible_only_needs_no_checkpoint(tmp_path):
     assert list(reconstructors) == ["visible-only"] and not skipped and not checkpoints
 
 
-def test_visible_fractions_count_what_the_renderer_shows():
-    from arm_sim.camera import look_at
-    from arm_sim.depth_noise import DepthNoise
-    from arm_sim.objects import ObjectModel
-    from arm_sim.scenes import PlacedObject, Scene
-    from arm_sim.world import SimWorld
-
-    block = trimesh.creation.box(extents=(0.08, 0.08, 0.08)).apply_translation((0, 0, 0.04))
-    wall = trimesh.creation.box(extents=(0.02, 0.2, 0.2)).apply_translation((0, 0, 0.1))
-    objects = [PlacedObject(ObjectModel("block", "box", block, [block]), 1.0, pose((0.0, 0.0, 0.0))),
-               PlacedObject(ObjectModel("wall", "box", wall, [wall]), 1.0, pose((0.3, 0.1, 0.0)))]
-    scene = Scene(objects)
-    world = SimWorld(scene, robot_arm=False, width=320, height=240)
-    frame = world.render(look_at((0.8, 0.0, 0.3), (0.0, 0.0, 0.05)), DepthNoise(enabled=False), with_visibility=False)
-    world.close()
-    visible = bench_recon.visible_fractions(scene, frame)
-    alone = bench_recon.object_silhouette(objects[0], frame.K, frame.T_world_camera, frame.labels.shape)
-    assert visible[1] == 1.0 and 0.2 < visible[0] < 0.8, "the wall hides part of the block"
-    assert np.count_nonzero((frame.labels == 1) & ~alone) == 0, "visible pixels lie inside the silhouette"
-
-
 def synthetic_results():
     """Two objects: arm halves baseline's Chamfer; one arm object and the baseline ones move."""
     def entry(chamfer, moved):
