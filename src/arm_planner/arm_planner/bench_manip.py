@@ -53,7 +53,7 @@ def plan_episodes(n: int, tasks, bins, seed: int) -> list[Episode]:
     return [Episode(i, *combos[i % len(combos)], seed * 100_003 + i) for i in range(n)]
 
 
-def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 6):
+def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 3):
     """(scene, target index, frame) for the episode, or raises RuntimeError when the bin is unreachable."""
     from arm_sim.depth_noise import DepthNoise
     from arm_sim.scenes import task_scene
