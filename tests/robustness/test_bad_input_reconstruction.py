@@ -2,11 +2,10 @@
 
 import pytest
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+from robustness_nodes import reconstruction_params, start
 
 from arm_sim.robustness import Probe, convention_report
 from arm_sim.robustness_cases import run_reconstruction_bad_inputs
-
-from conftest import reconstruction_params, start
 
 
 @pytest.fixture(scope="module")

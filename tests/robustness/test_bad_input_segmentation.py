@@ -2,11 +2,10 @@
 
 import pytest
 from rclpy.qos import ReliabilityPolicy
+from robustness_nodes import start
 
 from arm_sim.robustness import CAMERA_TOPICS, Probe, convention_report
 from arm_sim.robustness_cases import run_segmentation_bad_inputs
-
-from conftest import start
 
 PREFIX = "/robustness/"
 

@@ -1,0 +1,69 @@
+"""plan_node under degenerate meshes, unknown targets and tasks, bad joint states and goals, over DDS."""
+
+import pytest
+from rclpy.qos import DurabilityPolicy
+from robustness_nodes import start
+
+from arm_sim.robustness import Probe, convention_report
+from arm_sim.robustness_cases import run_planner_bad_inputs
+
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
+KNOWN_GAPS = {
+    "meshes: 1e6 m box": "plan_node accepts a 1e6 m object: the twin goes unstable (MuJoCo prints 'Nan, Inf or huge "
+    "value in QPOS' for every rollout, unthrottled) and the goal still reports 'task met in the twin'",
+}
+
+
+@pytest.fixture(scope="module")
+def run(robustness_logs):
+    process = start("planner", robustness_logs, params=FAST_PLANNER)
+    probe = Probe()
+    try:
+        report = run_planner_bad_inputs(probe, process)
+        subscriptions = probe.node.get_subscriptions_info_by_topic("/arm/meshes")
+        conventions = convention_report(probe, "planner")
+    finally:
+        probe.close()
+        exit_code = process.stop()
+    return {"report": report, "subscriptions": subscriptions, "conventions": conventions, "exit_code": exit_code,
+            "log": process.log()}
+
+
+def test_stays_alive_answers_every_goal_and_publishes_nothing_wrong(run):
+    report = run["report"]
+    assert report["action_server_ready"]
+    assert report["alive"] and not report["tracebacks"], report["tracebacks"]
+    assert report["invalid_outputs"] == []
+    unexpected = [c for c in report["cases"] if not c["ok"] and c["name"] not in KNOWN_GAPS]
+    assert unexpected == []
+
+
+@pytest.mark.xfail(strict=False, reason=KNOWN_GAPS["meshes: 1e6 m box"])
+def test_physically_absurd_objects_are_refused(run):
+    assert [c["name"] for c in run["report"]["cases"] if not c["ok"]] == []
+
+
+def test_only_planned_goals_publish_trajectories(run):
+    report = run["report"]
+    assert report["trajectories_published"] == report["goals_planned"]
+
+
+def test_refusals_are_logged_and_rate_limited(run):
+    assert run["report"]["error_lines"] >= 1
+    assert run["report"]["rate_limit_violations"] == []
+
+
+def test_meshes_subscription_is_transient_local(run):
+    ours = [s for s in run["subscriptions"] if s.node_name == "plan_node"]
+    assert ours and ours[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+
+
+def test_parameters_are_declared_with_descriptors_and_ranges(run):
+    c = run["conventions"]
+    assert c["without_description"] == [] and c["numeric_without_range"] == []
+    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
+    assert c["bad_values_accepted_at_run_time"] == []
+
+
+def test_clean_shutdown_on_sigint(run):
+    assert run["exit_code"] == 0, run["log"][-2000:]
