@@ -105,6 +105,15 @@ def select_endpoints(
     return index, exists.gather(1, index)
 
 
+def _box_around_existing(cells: torch.Tensor, margin_cells: int) -> tuple[slice, slice, slice]:
+    existing = (cells >= 0.5).any(dim=0).nonzero()
+    if len(existing) == 0:
+        return (slice(None),) * 3
+    lo = (existing.min(dim=0).values - margin_cells).clamp_min(0).tolist()
+    hi = (existing.max(dim=0).values + margin_cells + 1).tolist()
+    return tuple(slice(a, min(b, size)) for a, b, size in zip(lo, hi, cells.shape[1:], strict=True))
+
+
 def connectivity_value_and_gradient(
     logits: torch.Tensor,
     factor: int = 2,
@@ -112,11 +121,18 @@ def connectivity_value_and_gradient(
     with_gradient: bool = True,
     on_path_tolerance: float = 1e-4,
     generator: torch.Generator | None = None,
+    margin_cells: int = 2,
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
-    """Pair-averaged ``log P(C(v))`` ``[B]`` and the appendix-B ``d/dV`` ``[B, X, Y, Z]`` (unmasked)."""
+    """Pair-averaged ``log P(C(v))`` ``[B]`` and the appendix-B ``d/dV`` ``[B, X, Y, Z]`` (unmasked).
+
+    Paths are searched in the box around the batch's existing cells widened by ``margin_cells``
+    (the most likely paths between existing cells stay near them); cells outside get no gradient.
+    """
     with torch.no_grad():
         v = torch.sigmoid(logits.float())
-        cells = coarsen_occupancy(v, factor).clamp(V_MIN, 1.0 - V_MIN)
+        all_cells = coarsen_occupancy(v, factor).clamp(V_MIN, 1.0 - V_MIN)
+        box = _box_around_existing(all_cells, margin_cells)
+        cells = all_cells[(slice(None), *box)].contiguous()
         node_cost = -torch.log(cells).flatten(1)
         endpoints, exists = select_endpoints(cells, max_endpoints, generator)
         cost_from = cheapest_path_costs(node_cost.view_as(cells), endpoints)
@@ -151,7 +167,8 @@ def connectivity_value_and_gradient(
         keep = pair_valid.unsqueeze(2) & ~is_endpoint
         # each unordered pair stands for (a, b) and (b, a): twice the terms over twice the pairs
         cell_gradient = torch.where(keep, term, torch.zeros_like(term)).sum(dim=1) / n_pairs[:, None]
-        spread = cell_gradient.view_as(cells)
+        spread = torch.zeros_like(all_cells)
+        spread[(slice(None), *box)] = cell_gradient.view_as(cells)
         for axis in (1, 2, 3):
             spread = spread.repeat_interleave(factor, dim=axis)
     return value, spread
