@@ -215,6 +215,8 @@ class BagReplayer(Node):
             self.passes += 1
             if not self.loop or (self.max_loops and self.passes >= self.max_loops):
                 break
+            if self.mode == "original" and not self._sleep_until(start_wall + stamps.period_ns() * 1e-9 / self.rate):
+                return  # the next pass starts one bag period (span + one step) after this one
         if pending_ns is not None:
             self._finish_frame(pending_ns)
         self.frames_incomplete = groups.dropped + len(groups.pending)

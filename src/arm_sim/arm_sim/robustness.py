@@ -222,13 +222,14 @@ class Probe:
 
     def record(self, msg_type, topic: str, qos=10, keep: int | None = None, on_message=None):
         """Messages received on topic, in a list (or a deque of the last `keep`), with their arrival
-        times (time.monotonic) in the parallel `.times` attribute."""
+        times (time.monotonic) in the parallel `.times` attribute and the running count in `.total`."""
         store = _Recorded(keep)
 
         def callback(msg):
             with self.lock:
                 store.append(msg)
                 store.times.append(time.monotonic())
+                store.total += 1
             if on_message is not None:
                 on_message(msg)
 
@@ -287,6 +288,7 @@ class _Recorded(deque):
     def __init__(self, keep):
         super().__init__(maxlen=keep)
         self.times = deque(maxlen=keep)
+        self.total = 0
 
 
 def stamp_of(msg) -> float:

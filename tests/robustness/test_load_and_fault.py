@@ -1,0 +1,81 @@
+"""The full graph fed by a 30 Hz camera (a looping bag): latest-frame processing, bounded memory, no
+crash; then kill -9 of the reconstruction node mid-run and its restart."""
+
+import pytest
+from robustness_nodes import reconstruction_params
+
+from arm_sim.robustness import NodeProcess, Probe, node_built, render_frames, write_camera_bag
+from arm_sim.robustness_load import run_fault, run_load, start_graph, stop_graph
+
+LOAD_S = 20.0
+CAMERA_HZ = 30.0
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": False}
+
+
+@pytest.fixture(scope="module")
+def run(robustness_logs, tmp_path_factory):
+    params = reconstruction_params()
+    for key in ("segmentation", "reconstruction", "planner", "replay"):
+        if not node_built(key):
+            pytest.skip(f"{key} is not built")
+    bag = tmp_path_factory.mktemp("load") / "camera_30hz"
+    write_camera_bag(bag, render_frames(5, seed=3, count=3), CAMERA_HZ)
+    log_dir = robustness_logs / "graph"
+    graph = start_graph(log_dir, bag, params, planner_params=FAST_PLANNER)
+    probe = Probe()
+    try:
+        load = run_load(probe, graph, LOAD_S)
+        fault = run_fault(probe, graph, load.pop("watch"), lambda: NodeProcess(
+            "reconstruction", log_dir / "reconstruction_restarted.log", params=params))
+    finally:
+        probe.close()
+        stopped = stop_graph(graph)
+    return {"load": load, "fault": fault, "stopped": stopped}
+
+
+def test_camera_runs_near_30_hz_into_the_full_graph_without_a_crash(run):
+    load = run["load"]
+    assert load["warm"], "no meshes came out of the graph"
+    assert all(load["alive"].values()), load["alive"]
+    assert load["rates_hz"]["camera"] > 0.6 * CAMERA_HZ, load["rates_hz"]
+    assert load["rates_hz"]["segmentation"] > 0
+
+
+def test_latest_frame_processing_keeps_the_lag_bounded(run):
+    lag = run["load"]["lag"]["segmentation"]
+    assert lag["outputs"] >= 5, lag
+    # a queue would add (30 Hz x processing time - 1) frames of lag every second
+    assert lag["last_third_median_s"] - lag["first_third_median_s"] < 1.0, lag
+    assert lag["max_s"] < 5.0, lag
+    dropped = float(run["load"]["diagnostics"]["segmentation"].get("stale_messages_dropped", 0))
+    received = float(run["load"]["diagnostics"]["segmentation"].get("messages_received", 0))
+    assert received > 0 and dropped >= 0
+
+
+def test_memory_growth_below_50_mb(run):
+    growth = {k: v["max_growth_mb"] for k, v in run["load"]["memory"].items()}
+    assert all(g is not None and g < 50.0 for g in growth.values()), growth
+
+
+def test_kill9_of_reconstruction_planner_keeps_meshes_and_pipeline_resumes(run):
+    fault = run["fault"]
+    assert fault["killed_exit_code"] == -9
+    assert all(fault["others_alive_during_outage"].values()), fault
+    assert fault["planner_objects_during_outage"] == fault["planner_objects_before"] > 0, fault
+    assert fault["segmentation_kept_publishing"], fault
+    assert fault["goal_during_outage"].get("planned"), fault["goal_during_outage"]
+    assert fault["resumed"], fault
+    assert all(fault["alive_after"].values()), fault["alive_after"]
+
+
+@pytest.mark.parametrize("key", ["replay", "segmentation", "planner"])
+def test_graph_shuts_down_cleanly_without_tracebacks(run, key):
+    outcome = run["stopped"][key]
+    assert outcome["exit_code"] == 0 and not outcome["tracebacks"], outcome
+
+
+@pytest.mark.xfail(strict=False, reason="reconstruction_node's worker thread publishes after SIGINT shut the context "
+                   "down: 'RCLError: Failed to publish: publisher's context is invalid' traceback (exit code 0)")
+def test_reconstruction_shuts_down_cleanly_while_busy(run):
+    outcome = run["stopped"]["reconstruction"]
+    assert outcome["exit_code"] == 0 and not outcome["tracebacks"], outcome
