@@ -25,8 +25,13 @@ def run(robustness_logs):
     finally:
         probe.close()
         exit_code = process.stop()
-    return {"report": report, "subscriptions": subscriptions, "conventions": conventions, "exit_code": exit_code,
-            "log": process.log()}
+    return {
+        "report": report,
+        "subscriptions": subscriptions,
+        "conventions": conventions,
+        "exit_code": exit_code,
+        "log": process.log(),
+    }
 
 
 def test_stays_alive_answers_every_goal_and_publishes_nothing_wrong(run):

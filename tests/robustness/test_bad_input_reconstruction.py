@@ -19,8 +19,13 @@ def run(frames, robustness_logs):
     finally:
         probe.close()
         exit_code = process.stop()
-    return {"report": report, "publishers": publishers, "conventions": conventions, "exit_code": exit_code,
-            "log": process.log()}
+    return {
+        "report": report,
+        "publishers": publishers,
+        "conventions": conventions,
+        "exit_code": exit_code,
+        "log": process.log(),
+    }
 
 
 def test_stays_alive_and_publishes_nothing_wrong(run):
@@ -36,8 +41,9 @@ def test_every_frame_is_accounted_for(run):
     counters = report["counters"]
     assert counters["frames_received"] == report["frames_sent"], counters
     assert counters["frames_rejected"] >= report["rejects_expected"], counters
-    assert counters["frames_processed"] + counters["frames_rejected"] + counters["frames_dropped"] == report[
-        "frames_sent"], counters
+    assert (
+        counters["frames_processed"] + counters["frames_rejected"] + counters["frames_dropped"] == report["frames_sent"]
+    ), counters
 
 
 def test_rejections_are_logged_and_rate_limited(run):
@@ -45,8 +51,11 @@ def test_rejections_are_logged_and_rate_limited(run):
     assert run["report"]["rate_limit_violations"] == []
 
 
-@pytest.mark.xfail(strict=False, reason="reconstruction_node keys its rate limiter by exception type "
-                   "(ConversionError): a second, different problem within 5 s is not logged at all")
+@pytest.mark.xfail(
+    strict=False,
+    reason="reconstruction_node keys its rate limiter by exception type "
+    "(ConversionError): a second, different problem within 5 s is not logged at all",
+)
 def test_each_distinct_cause_is_logged(run):
     assert run["report"]["reasons_not_logged"] == []
 
@@ -63,8 +72,11 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(strict=False, reason="reconstruction_node rejects bad 'method'/'device' at run time but accepts "
-                   "out-of-choice 'decomposition.method' and 'frame_reliability'")
+@pytest.mark.xfail(
+    strict=False,
+    reason="reconstruction_node rejects bad 'method'/'device' at run time but accepts "
+    "out-of-choice 'decomposition.method' and 'frame_reliability'",
+)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

@@ -23,8 +23,13 @@ def run(frames, robustness_logs):
     finally:
         probe.close()
         exit_code = process.stop()
-    return {"report": report, "subscriptions": subscriptions, "conventions": conventions, "exit_code": exit_code,
-            "log": process.log()}
+    return {
+        "report": report,
+        "subscriptions": subscriptions,
+        "conventions": conventions,
+        "exit_code": exit_code,
+        "log": process.log(),
+    }
 
 
 def test_stays_alive_and_publishes_nothing_wrong(run):
@@ -42,8 +47,11 @@ def test_rejections_are_logged_and_rate_limited(run):
     assert report["rate_limit_violations"] == []
 
 
-@pytest.mark.xfail(strict=False, reason="segmentation_node keys its rate limiter by exception type (FrameError): "
-                   "a second, different problem within 5 s is not logged at all")
+@pytest.mark.xfail(
+    strict=False,
+    reason="segmentation_node keys its rate limiter by exception type (FrameError): "
+    "a second, different problem within 5 s is not logged at all",
+)
 def test_each_distinct_cause_is_logged(run):
     assert run["report"]["reasons_not_logged"] == []
 
@@ -60,8 +68,11 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(strict=False, reason="segmentation_node accepts out-of-choice string parameters at run time "
-                   "(no on_set_parameters callback for image_reliability)")
+@pytest.mark.xfail(
+    strict=False,
+    reason="segmentation_node accepts out-of-choice string parameters at run time "
+    "(no on_set_parameters callback for image_reliability)",
+)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

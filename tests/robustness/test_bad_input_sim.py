@@ -9,8 +9,7 @@ from arm_sim.robustness_cases import run_sim_bad_inputs
 
 @pytest.fixture(scope="module")
 def run(robustness_logs):
-    process = start("sim", robustness_logs, params={"n_objects": 3, "camera_rate_hz": 0.2, "width": 160,
-                                                    "height": 120})
+    process = start("sim", robustness_logs, params={"n_objects": 3, "camera_rate_hz": 0.2, "width": 160, "height": 120})
     probe = Probe()
     try:
         report = run_sim_bad_inputs(probe, process)
@@ -42,8 +41,9 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(strict=False, reason="sim_node accepts out-of-choice string parameters (split, "
-                   "image_reliability) at run time")
+@pytest.mark.xfail(
+    strict=False, reason="sim_node accepts out-of-choice string parameters (split, image_reliability) at run time"
+)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

@@ -32,13 +32,16 @@ def image(stamp_s, value=7, shape=(48, 64, 3)):
 
 
 def project_messages():
-    frame = SegmentedFrame(header=header_at(1.0, "camera"), rgb=image(1.0), world_frame_id="world",
-                           instance_ids=[1, 2])
+    frame = SegmentedFrame(header=header_at(1.0, "camera"), rgb=image(1.0), world_frame_id="world", instance_ids=[1, 2])
     box = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) * 0.05, np.array([[0, 1, 2], [0, 1, 3]]))
     meshes = ReconstructedObjectArray(header=header_at(1.0, "world"), table_height_m=0.01)
     meshes.objects = [reconstructed_object_msg(3, box, [box], 0.5, "arm")]
-    return [("/camera/color/image_raw", 10, image(1.0)), ("/arm/segmented_frame", 20, frame),
-            ("/arm/meshes", 30, meshes), ("/camera/color/image_raw", 40, image(2.0, 9))]
+    return [
+        ("/camera/color/image_raw", 10, image(1.0)),
+        ("/arm/segmented_frame", 20, frame),
+        ("/arm/meshes", 30, meshes),
+        ("/camera/color/image_raw", 40, image(2.0, 9)),
+    ]
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
@@ -59,8 +62,11 @@ def test_round_trip_restores_equal_messages(tmp_path, storage):
 
 def test_offered_qos_is_stored(tmp_path):
     with BagWriter(tmp_path / "bag") as writer:
-        writer.add_topic("/arm/meshes", "arm_interfaces/msg/ReconstructedObjectArray",
-                         QosSpec(reliable=True, transient_local=True, depth=1))
+        writer.add_topic(
+            "/arm/meshes",
+            "arm_interfaces/msg/ReconstructedObjectArray",
+            QosSpec(reliable=True, transient_local=True, depth=1),
+        )
         writer.write_message("/arm/meshes", 5, ReconstructedObjectArray())
     assert BagReader(tmp_path / "bag").qos["/arm/meshes"] == QosSpec(reliable=True, transient_local=True, depth=1)
 
@@ -136,8 +142,9 @@ def test_frame_groups_release_complete_frames_and_drop_stale_partial_ones():
 
 
 def replay(tmp_path, *args, **params):
-    process = NodeProcess("replay", tmp_path / "replay.log", args=args,
-                          params={"wait_subscribers_s": 0.0, "linger_s": 0.2, **params})
+    process = NodeProcess(
+        "replay", tmp_path / "replay.log", args=args, params={"wait_subscribers_s": 0.0, "linger_s": 0.2, **params}
+    )
     code = process.wait(60.0)
     if code is None:
         process.stop()

@@ -25,8 +25,12 @@ def run(robustness_logs, tmp_path_factory):
     probe = Probe()
     try:
         load = run_load(probe, graph, LOAD_S)
-        fault = run_fault(probe, graph, load.pop("watch"), lambda: NodeProcess(
-            "reconstruction", log_dir / "reconstruction_restarted.log", params=params))
+        fault = run_fault(
+            probe,
+            graph,
+            load.pop("watch"),
+            lambda: NodeProcess("reconstruction", log_dir / "reconstruction_restarted.log", params=params),
+        )
     finally:
         probe.close()
         stopped = stop_graph(graph)
@@ -74,8 +78,11 @@ def test_graph_shuts_down_cleanly_without_tracebacks(run, key):
     assert outcome["exit_code"] == 0 and not outcome["tracebacks"], outcome
 
 
-@pytest.mark.xfail(strict=False, reason="reconstruction_node's worker thread publishes after SIGINT shut the context "
-                   "down: 'RCLError: Failed to publish: publisher's context is invalid' traceback (exit code 0)")
+@pytest.mark.xfail(
+    strict=False,
+    reason="reconstruction_node's worker thread publishes after SIGINT shut the context "
+    "down: 'RCLError: Failed to publish: publisher's context is invalid' traceback (exit code 0)",
+)
 def test_reconstruction_shuts_down_cleanly_while_busy(run):
     outcome = run["stopped"]["reconstruction"]
     assert outcome["exit_code"] == 0 and not outcome["tracebacks"], outcome

@@ -5,8 +5,10 @@ from robustness_nodes import start
 
 from arm_sim.robustness import node_built, tracebacks
 
-SPIN_NODE_GAP = ("arm_sim/ros_common.py spin_node catches ValueError only: rclpy's InvalidParameterValueException/"
-                 "InvalidParameterTypeException (range and type violations) escape as a traceback, exit code 1")
+SPIN_NODE_GAP = (
+    "arm_sim/ros_common.py spin_node catches ValueError only: rclpy's InvalidParameterValueException/"
+    "InvalidParameterTypeException (range and type violations) escape as a traceback, exit code 1"
+)
 
 CASES = [
     ("segmentation", "sync_queue_size", 0, "range"),

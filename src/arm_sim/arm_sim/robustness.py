@@ -40,8 +40,14 @@ NODES = {
     "record": ("arm_sim", "record", None),
     "replay": ("arm_sim", "replay", None),
 }
-NODE_NAMES = {"sim": "sim_node", "segmentation": "segmentation_node", "reconstruction": "reconstruction_node",
-              "planner": "plan_node", "record": "bag_recorder", "replay": "bag_replayer"}
+NODE_NAMES = {
+    "sim": "sim_node",
+    "segmentation": "segmentation_node",
+    "reconstruction": "reconstruction_node",
+    "planner": "plan_node",
+    "record": "bag_recorder",
+    "replay": "bag_replayer",
+}
 SHIPPED_CHECKPOINT = ROOT / "src" / "arm_reconstruction" / "arm_reconstruction" / "checkpoints" / "arm.pt"
 CAMERA_TOPICS = ("camera/color/image_raw", "camera/depth/image_raw", "camera/camera_info", "camera/pose")
 
@@ -86,8 +92,15 @@ def _param_text(value) -> str:
 class NodeProcess:
     """One node executable in its own process group, output in a log file."""
 
-    def __init__(self, key: str, log_path, params: dict | None = None, remaps: dict | None = None,
-                 args: tuple = (), params_file: bool = True):
+    def __init__(
+        self,
+        key: str,
+        log_path,
+        params: dict | None = None,
+        remaps: dict | None = None,
+        args: tuple = (),
+        params_file: bool = True,
+    ):
         self.key = key
         self.log_path = pathlib.Path(log_path)
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -102,8 +115,9 @@ class NodeProcess:
         self.cmd = cmd
         self._log = open(self.log_path, "w")  # noqa: SIM115 - lives as long as the process
         self.started_s = time.monotonic()
-        self.process = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy(),
-                                        start_new_session=True)
+        self.process = subprocess.Popen(
+            cmd, stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True
+        )
 
     @property
     def pid(self) -> int:
@@ -183,7 +197,7 @@ def tracebacks(log_text: str) -> list[str]:
     lines = log_text.splitlines()
     for i, line in enumerate(lines):
         if line.startswith("Traceback (most recent call last)"):
-            tail = next((t for t in lines[i + 1:] if t and not t.startswith((" ", "\t"))), "?")
+            tail = next((t for t in lines[i + 1 :] if t and not t.startswith((" ", "\t"))), "?")
             found.append(tail)
     return found
 
@@ -243,8 +257,9 @@ class Probe:
             with self.lock:
                 for status in msg.status:
                     values = {kv.key: kv.value for kv in status.values}
-                    values["_level"] = str(int.from_bytes(status.level, "little") if isinstance(status.level, bytes)
-                                           else int(status.level))
+                    values["_level"] = str(
+                        int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
+                    )
                     values["_message"] = status.message
                     values["_received_s"] = str(time.monotonic())
                     self.diagnostics[status.name] = values
@@ -381,8 +396,9 @@ CAMERA_EYE = (0.7, 0.0, 0.5)
 CAMERA_TARGET = (0.0, 0.0, 0.05)
 
 
-def render_frames(n_objects: int, width: int = 320, height: int = 240, seed: int = 0, count: int = 1,
-                  settle_s: float = 1.0):
+def render_frames(
+    n_objects: int, width: int = 320, height: int = 240, seed: int = 0, count: int = 1, settle_s: float = 1.0
+):
     """`count` noisy renders of one seeded, settled cluttered scene (no robot), as RgbdFrames."""
     from arm_sim.camera import look_at
     from arm_sim.objects import object_pool
@@ -391,8 +407,14 @@ def render_frames(n_objects: int, width: int = 320, height: int = 240, seed: int
 
     rng = np.random.default_rng(seed)
     if n_objects:
-        scene = cluttered_scene(object_pool(split="heldout", seed=seed), rng, n_objects=n_objects,
-                                scale_range=(0.5, 1.2), drop_std_m=0.08 + 0.004 * n_objects, settle_s=settle_s)
+        scene = cluttered_scene(
+            object_pool(split="heldout", seed=seed),
+            rng,
+            n_objects=n_objects,
+            scale_range=(0.5, 1.2),
+            drop_std_m=0.08 + 0.004 * n_objects,
+            settle_s=settle_s,
+        )
     else:
         scene = Scene()
     world = SimWorld(scene, robot_arm=False, width=width, height=height)
@@ -403,8 +425,9 @@ def render_frames(n_objects: int, width: int = 320, height: int = 240, seed: int
         world.close()
 
 
-def camera_messages(frame, stamp_s: float, camera_frame_id: str = "camera_color_optical_frame",
-                    world_frame_id: str = "world") -> dict:
+def camera_messages(
+    frame, stamp_s: float, camera_frame_id: str = "camera_color_optical_frame", world_frame_id: str = "world"
+) -> dict:
     """rgb, depth, camera_info and pose messages of one RgbdFrame, keyed by CAMERA_TOPICS."""
     header = header_at(stamp_s, camera_frame_id)
     h, w = frame.depth_m.shape
@@ -460,7 +483,6 @@ def write_camera_bag(path, frames, rate_hz: float, storage: str = "mcap", joint_
     return write_bag(path, messages(), storage)
 
 
-
 # --- parameters over the ROS parameter services ---------------------------------------------------
 BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
 
@@ -484,8 +506,9 @@ def describe_parameters(probe, node_name: str) -> dict[str, dict]:
     from rcl_interfaces.srv import DescribeParameters, ListParameters
 
     names = list(_call(probe, ListParameters, f"/{node_name}/list_parameters", ListParameters.Request()).result.names)
-    descriptors = _call(probe, DescribeParameters, f"/{node_name}/describe_parameters",
-                        DescribeParameters.Request(names=names)).descriptors
+    descriptors = _call(
+        probe, DescribeParameters, f"/{node_name}/describe_parameters", DescribeParameters.Request(names=names)
+    ).descriptors
     numeric = {ParameterType.PARAMETER_INTEGER: "integer", ParameterType.PARAMETER_DOUBLE: "double"}
     return {
         d.name: {

@@ -171,10 +171,18 @@ def segmentation_cases(frames: dict) -> list[Case]:
         Case("depth with NaN/inf/negative pixels", "valid", _camera_case(normal, _set_depth(_sprinkle))),
         Case("depth 16UC1 millimetres", "valid", _camera_case(normal, _depth_mm)),
         Case("rgb smaller than depth", "reject", _camera_case(normal, _rgb_smaller), "rgb is"),
-        Case("rgb encoding yuv422", "reject", _camera_case(normal, _field("camera/color/image_raw", encoding="yuv422")),
-             "yuv422"),
-        Case("depth encoding 64FC1", "reject", _camera_case(normal, _field("camera/depth/image_raw", encoding="64FC1")),
-             "64FC1"),
+        Case(
+            "rgb encoding yuv422",
+            "reject",
+            _camera_case(normal, _field("camera/color/image_raw", encoding="yuv422")),
+            "yuv422",
+        ),
+        Case(
+            "depth encoding 64FC1",
+            "reject",
+            _camera_case(normal, _field("camera/depth/image_raw", encoding="64FC1")),
+            "64FC1",
+        ),
         Case("depth data truncated", "reject", _camera_case(normal, _truncate("camera/depth/image_raw")), "too short"),
         Case("depth 100000x100000 without data", "reject", _camera_case(normal, _huge_empty_image), "too short"),
         Case("zero intrinsics", "reject", _camera_case(normal, _info_k([0.0] * 9)), "intrinsics"),
@@ -182,16 +190,26 @@ def segmentation_cases(frames: dict) -> list[Case]:
         Case("camera_info missing", "silent", _camera_case(normal, drop=("camera/camera_info",))),
         Case("pose NaN position", "reject", _camera_case(normal, _pose(position=(nan, 0.0, 0.5))), "non-finite"),
         Case("pose inf position", "reject", _camera_case(normal, _pose(position=(inf, 0.0, 0.5))), "non-finite"),
-        Case("pose zero quaternion", "reject", _camera_case(normal, _pose(orientation=(0.0, 0.0, 0.0, 0.0))),
-             "quaternion"),
+        Case(
+            "pose zero quaternion",
+            "reject",
+            _camera_case(normal, _pose(orientation=(0.0, 0.0, 0.0, 0.0))),
+            "quaternion",
+        ),
         Case("empty scene", "valid", _camera_case(frames["empty"])),
         Case(f"{int(frames['crowded'].labels.max())} objects", "valid", _camera_case(frames["crowded"])),
     ]
 
 
-def run_segmentation_bad_inputs(probe, process, frames: dict, output_topic: str = "arm/segmented_frame",
-                                input_prefix: str = "", reliability: str = "reliable",
-                                case_timeout_s: float = 20.0) -> dict:
+def run_segmentation_bad_inputs(
+    probe,
+    process,
+    frames: dict,
+    output_topic: str = "arm/segmented_frame",
+    input_prefix: str = "",
+    reliability: str = "reliable",
+    case_timeout_s: float = 20.0,
+) -> dict:
     """Send every segmentation case (each with its own stamp), then a valid frame; judge each."""
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, Image
@@ -199,8 +217,12 @@ def run_segmentation_bad_inputs(probe, process, frames: dict, output_topic: str 
     from arm_interfaces.msg import SegmentedFrame
     from arm_sim.ros_common import sensor_qos
 
-    types = {"camera/color/image_raw": Image, "camera/depth/image_raw": Image, "camera/camera_info": CameraInfo,
-             "camera/pose": PoseStamped}
+    types = {
+        "camera/color/image_raw": Image,
+        "camera/depth/image_raw": Image,
+        "camera/camera_info": CameraInfo,
+        "camera/pose": PoseStamped,
+    }
     qos = sensor_qos(reliability, depth=5)
     publishers = {t: probe.publisher(k, input_prefix + t, qos) for t, k in types.items()}
     outputs = probe.record(SegmentedFrame, output_topic, 10)
@@ -236,8 +258,15 @@ def run_segmentation_bad_inputs(probe, process, frames: dict, output_topic: str 
         ok, outcome = _judge(case.expect, was_published, was_rejected)
         if case.name.startswith("valid frame"):
             ok = was_published
-        results.append({"name": case.name, "expect": case.expect, "outcome": outcome, "ok": ok,
-                        "reason": case.reason if outcome == "rejected" else ""})
+        results.append(
+            {
+                "name": case.name,
+                "expect": case.expect,
+                "outcome": outcome,
+                "ok": ok,
+                "reason": case.reason if outcome == "rejected" else "",
+            }
+        )
     with probe.lock:
         invalid = [f"t={stamp_of(m):.0f}: {p}" for m in outputs for p in segmented_frame_problems(m)]
     return _finish_report(node, process, results, invalid, {"subscribers_matched": ready})
@@ -303,20 +332,29 @@ def reconstruction_cases(frames: dict, crowded: bool = True) -> list[Case]:
         Case("depth all NaN", "valid", _frame_case(normal, _frame_depth(lambda d: np.full_like(d, nan)))),
         Case("depth with NaN/inf/negative pixels", "valid", _frame_case(normal, _frame_depth(_sprinkle))),
         Case("rgb smaller than depth", "reject", _frame_case(normal, _frame_image_half("rgb", "rgb8")), "rgb"),
-        Case("labels smaller than depth", "reject", _frame_case(normal, _frame_image_half("labels", "16UC1")),
-             "labels"),
+        Case(
+            "labels smaller than depth", "reject", _frame_case(normal, _frame_image_half("labels", "16UC1")), "labels"
+        ),
         Case("labels encoding rgb8", "reject", _frame_case(normal, _frame_set("labels.encoding", "rgb8")), "rgb8"),
         Case("depth encoding mono8", "reject", _frame_case(normal, _frame_set("depth.encoding", "mono8")), "mono8"),
-        Case("unsupported encoding yuv422", "reject", _frame_case(normal, _frame_set("depth.encoding", "yuv422")),
-             "yuv422"),
-        Case("labels data truncated", "reject", _frame_case(normal, _frame_set("labels.data", b"\x00" * 10)),
-             "too short"),
+        Case(
+            "unsupported encoding yuv422",
+            "reject",
+            _frame_case(normal, _frame_set("depth.encoding", "yuv422")),
+            "yuv422",
+        ),
+        Case(
+            "labels data truncated", "reject", _frame_case(normal, _frame_set("labels.data", b"\x00" * 10)), "too short"
+        ),
         Case("zero intrinsics", "reject", _frame_case(normal, _frame_set("camera_info.k", [0.0] * 9)), "intrinsics"),
         Case("NaN intrinsics", "reject", _frame_case(normal, _frame_set("camera_info.k", [nan] * 9)), "intrinsics"),
-        Case("pose NaN position", "reject", _frame_case(normal, _frame_pose(position=(nan, 0.0, 0.5))),
-             "non-finite"),
-        Case("pose zero quaternion", "reject", _frame_case(normal, _frame_pose(orientation=(0.0, 0.0, 0.0, 0.0))),
-             "quaternion"),
+        Case("pose NaN position", "reject", _frame_case(normal, _frame_pose(position=(nan, 0.0, 0.5))), "non-finite"),
+        Case(
+            "pose zero quaternion",
+            "reject",
+            _frame_case(normal, _frame_pose(orientation=(0.0, 0.0, 0.0, 0.0))),
+            "quaternion",
+        ),
         Case("no rgb", "valid", _frame_case(normal, _frame_set("rgb", numpy_to_image(np.zeros((0, 0, 3)), "rgb8")))),
         Case("empty scene", "valid", _frame_case(frames["empty"])),
         Case("instance ids not in the labels", "valid", _frame_case(normal, _frame_set("instance_ids", [1, 2, 999]))),
@@ -343,8 +381,9 @@ def _wait_log_quiet(process, quiet_s: float = 0.5, timeout_s: float = 5.0) -> No
         time.sleep(0.1)
 
 
-def run_reconstruction_bad_inputs(probe, process, frames: dict, crowded: bool = True,
-                                  valid_timeout_s: float = 300.0, reject_wait_s: float = 1.0) -> dict:
+def run_reconstruction_bad_inputs(
+    probe, process, frames: dict, crowded: bool = True, valid_timeout_s: float = 300.0, reject_wait_s: float = 1.0
+) -> dict:
     """Send each reconstruction case; valid ones are waited for (one at a time: latest-frame
     processing would drop a frame sent while another is being reconstructed)."""
     from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
@@ -372,25 +411,44 @@ def run_reconstruction_bad_inputs(probe, process, frames: dict, crowded: bool = 
         if case.expect == "valid":  # a valid case may be rejected (logged, unless the rate limiter holds it)
             probe.wait_until(
                 lambda s=stamp_s, n=rejections_before: published(s) or _frame_rejections(process.log()) > n,
-                valid_timeout_s, poll_s=0.2)
+                valid_timeout_s,
+                poll_s=0.2,
+            )
         else:
             probe.wait_until(lambda s=stamp_s: published(s), reject_wait_s)
         was_published = published(stamp_s)
         ok, outcome = _judge(case.expect, was_published, False)
         if case.name.startswith("valid frame"):
             ok = was_published
-        results.append({"name": case.name, "expect": case.expect, "outcome": outcome, "ok": ok,
-                        "seconds": round(time.monotonic() - started, 2),
-                        "reason": case.reason if case.expect == "reject" else ""})
+        results.append(
+            {
+                "name": case.name,
+                "expect": case.expect,
+                "outcome": outcome,
+                "ok": ok,
+                "seconds": round(time.monotonic() - started, 2),
+                "reason": case.reason if case.expect == "reject" else "",
+            }
+        )
     probe.wait_until(lambda: probe.diagnostic_number(node, "frames_received", 0) >= len(cases), 5.0)
-    counters = {k: probe.diagnostic_number(node, k, -1) for k in
-                ("frames_received", "frames_processed", "frames_rejected", "frames_dropped")}
+    counters = {
+        k: probe.diagnostic_number(node, k, -1)
+        for k in ("frames_received", "frames_processed", "frames_rejected", "frames_dropped")
+    }
     with probe.lock:
         invalid = [f"t={stamp_of(m):.0f}: {p}" for m in outputs for p in mesh_array_problems(m)]
-    return _finish_report(node, process, results, invalid, {
-        "subscribers_matched": ready, "frames_sent": len(cases), "counters": counters,
-        "rejects_expected": sum(c.expect == "reject" for c in cases),
-    })
+    return _finish_report(
+        node,
+        process,
+        results,
+        invalid,
+        {
+            "subscribers_matched": ready,
+            "frames_sent": len(cases),
+            "counters": counters,
+            "rejects_expected": sum(c.expect == "reject" for c in cases),
+        },
+    )
 
 
 # --- plan_node ------------------------------------------------------------------------------------
@@ -400,8 +458,13 @@ def _box_object(object_id, centre, extents=(0.05, 0.05, 0.08)):
     box = trimesh.creation.box(extents=extents)
     T = np.eye(4)
     T[:3, 3] = centre
-    return ReconstructedObject(id=object_id, pose=matrix_to_pose(T), mesh=mesh_to_msg(box.vertices, box.faces),
-                               visible_fraction=1.0, method="robustness")
+    return ReconstructedObject(
+        id=object_id,
+        pose=matrix_to_pose(T),
+        mesh=mesh_to_msg(box.vertices, box.faces),
+        visible_fraction=1.0,
+        method="robustness",
+    )
 
 
 def _mesh_case(mutate, n_extra: int = 0):
@@ -414,8 +477,9 @@ def _mesh_case(mutate, n_extra: int = 0):
         array.objects = [_box_object(1, (0.0, 0.0, 0.04)), _box_object(2, (0.0, 0.12, 0.04))]
         for k in range(n_extra):  # a 7 x 6 grid of small boxes, 6 cm apart, in front of the robot
             x, y = divmod(k, 6)
-            array.objects.append(_box_object(3 + k, (0.1 + 0.06 * x, -0.3 + 0.06 * y + 0.06 * (y >= 3),
-                                                     0.025), (0.03, 0.03, 0.05)))
+            array.objects.append(
+                _box_object(3 + k, (0.1 + 0.06 * x, -0.3 + 0.06 * y + 0.06 * (y >= 3), 0.025), (0.03, 0.03, 0.05))
+            )
         if mutate is not None:
             mutate(array)
         return array
@@ -522,24 +586,44 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
             return {"answered": False, "message": "no result"}
         result = result_future.result()
         planned = result.status == 4  # STATUS_SUCCEEDED: a plan came back (success or not)
-        return {"answered": True, "accepted": True, "planned": planned, "success": bool(result.result.success),
-                "message": result.result.message, "points": len(result.result.trajectory.points),
-                "seconds": round(time.monotonic() - started, 2)}
+        return {
+            "answered": True,
+            "accepted": True,
+            "planned": planned,
+            "success": bool(result.result.success),
+            "message": result.result.message,
+            "points": len(result.result.trajectory.points),
+            "seconds": round(time.monotonic() - started, 2),
+        }
 
     def publish_meshes(array):
         before = probe.diagnostic_number(node, "meshes_received", 0) + probe.diagnostic_number(
-            node, "meshes_rejected", 0)
+            node, "meshes_rejected", 0
+        )
         meshes.publish(array)
-        probe.wait_until(lambda: probe.diagnostic_number(node, "meshes_received", 0)
-                         + probe.diagnostic_number(node, "meshes_rejected", 0) > before, 10.0)
+        probe.wait_until(
+            lambda: (
+                probe.diagnostic_number(node, "meshes_received", 0)
+                + probe.diagnostic_number(node, "meshes_rejected", 0)
+                > before
+            ),
+            10.0,
+        )
 
     results = []
 
     def record(name, expect, answer, refusal_expected):
         ok = answer.get("answered", False) and (not refusal_expected or not answer.get("planned", True))
-        results.append({"name": name, "expect": expect, "ok": bool(ok),
-                        "outcome": "planned" if answer.get("planned") else "refused",
-                        "message": answer.get("message", "")[:200], "seconds": answer.get("seconds")})
+        results.append(
+            {
+                "name": name,
+                "expect": expect,
+                "ok": bool(ok),
+                "outcome": "planned" if answer.get("planned") else "refused",
+                "message": answer.get("message", "")[:200],
+                "seconds": answer.get("seconds"),
+            }
+        )
 
     probe.wait_for_subscribers([meshes, joints], 30.0)
     publish_meshes(_mesh_case(None)())
@@ -578,9 +662,17 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
         invalid = [p for t in trajectories for p in trajectory_problems(t)]
         published = len(trajectories)
     planned = sum(r["outcome"] == "planned" for r in results)
-    return _finish_report(node, process, results, invalid, {
-        "action_server_ready": ready, "trajectories_published": published, "goals_planned": planned,
-    })
+    return _finish_report(
+        node,
+        process,
+        results,
+        invalid,
+        {
+            "action_server_ready": ready,
+            "trajectories_published": published,
+            "goals_planned": planned,
+        },
+    )
 
 
 # --- sim_node ------------------------------------------------------------------------------------
@@ -619,14 +711,23 @@ def run_sim_bad_inputs(probe, process, settle_s: float = 2.0) -> dict:
     for name, expect, msg in sim_trajectory_cases():
         executing_before = process.log().count("executing trajectory")
         publisher.publish(msg)
-        accepted = probe.wait_until(lambda n=executing_before: process.log().count("executing trajectory") > n,
-                                    settle_s)
+        accepted = probe.wait_until(
+            lambda n=executing_before: process.log().count("executing trajectory") > n, settle_s
+        )
         ok = process.alive() and (expect != "reject" or not accepted)
-        results.append({"name": name, "expect": expect, "outcome": "accepted" if accepted else "rejected", "ok": ok,
-                        "reason": "rejected trajectory" if expect == "reject" else ""})
+        results.append(
+            {
+                "name": name,
+                "expect": expect,
+                "outcome": "accepted" if accepted else "rejected",
+                "ok": ok,
+                "reason": "rejected trajectory" if expect == "reject" else "",
+            }
+        )
     probe.wait_until(lambda: False, settle_s)  # let an accepted extreme trajectory run
     with probe.lock:
         invalid = [p for s in states for p in joint_state_problems(s)]
         received = len(states)
-    return _finish_report(node, process, results, invalid, {"subscribers_matched": ready,
-                                                            "joint_states_checked": received})
+    return _finish_report(
+        node, process, results, invalid, {"subscribers_matched": ready, "joint_states_checked": received}
+    )

@@ -15,12 +15,19 @@ from arm_sim.robustness import NodeProcess, stamp_of, tracebacks
 GRAPH_ORDER = ("replay", "segmentation", "reconstruction", "planner")
 
 
-def start_graph(log_dir, bag, recon_params: dict, image_reliability: str = "reliable",
-                planner_params: dict | None = None, replay_params: dict | None = None) -> dict[str, NodeProcess]:
+def start_graph(
+    log_dir,
+    bag,
+    recon_params: dict,
+    image_reliability: str = "reliable",
+    planner_params: dict | None = None,
+    replay_params: dict | None = None,
+) -> dict[str, NodeProcess]:
     """The full graph fed by a looping camera bag (replayed at its own rate)."""
     graph = {
-        "segmentation": NodeProcess("segmentation", log_dir / "segmentation.log",
-                                    params={"image_reliability": image_reliability}),
+        "segmentation": NodeProcess(
+            "segmentation", log_dir / "segmentation.log", params={"image_reliability": image_reliability}
+        ),
         "reconstruction": NodeProcess("reconstruction", log_dir / "reconstruction.log", params=recon_params),
         "planner": NodeProcess("planner", log_dir / "planner.log", params=planner_params or {}),
     }
@@ -61,27 +68,34 @@ class GraphWatch:
 
             return on_output
 
-        self.camera = probe.record(CameraInfo, "camera/camera_info", sensor_qos("reliable", 10), keep=10,
-                                   on_message=on_camera)
-        self.frames = probe.record(SegmentedFrame, "arm/segmented_frame", 10, keep=2,
-                                   on_message=lag("segmentation"))
-        self.meshes = probe.record(ReconstructedObjectArray, "arm/meshes", latched_qos(), keep=20,
-                                   on_message=lag("reconstruction"))
+        self.camera = probe.record(
+            CameraInfo, "camera/camera_info", sensor_qos("reliable", 10), keep=10, on_message=on_camera
+        )
+        self.frames = probe.record(SegmentedFrame, "arm/segmented_frame", 10, keep=2, on_message=lag("segmentation"))
+        self.meshes = probe.record(
+            ReconstructedObjectArray, "arm/meshes", latched_qos(), keep=20, on_message=lag("reconstruction")
+        )
         probe.watch_diagnostics()
 
     def totals(self) -> dict[str, int]:
         """Messages received so far per stream (the deques keep only the last few)."""
         with self.probe.lock:
-            return {"camera": self.camera.total, "segmentation": self.frames.total,
-                    "reconstruction": self.meshes.total}
+            return {"camera": self.camera.total, "segmentation": self.frames.total, "reconstruction": self.meshes.total}
 
     def last_meshes(self):
         with self.probe.lock:
             return self.meshes[-1] if self.meshes else None
 
 
-def run_load(probe, graph: dict[str, NodeProcess], duration_s: float, warmup_meshes: int = 3,
-             warmup_timeout_s: float = 240.0, sample_period_s: float = 1.0, progress=None) -> dict:
+def run_load(
+    probe,
+    graph: dict[str, NodeProcess],
+    duration_s: float,
+    warmup_meshes: int = 3,
+    warmup_timeout_s: float = 240.0,
+    sample_period_s: float = 1.0,
+    progress=None,
+) -> dict:
     """Run the graph for duration_s once `warmup_meshes` mesh arrays came out (allocator pools and
     caches fill during the first frames); sample memory and rates. Memory of the warm-up is kept
     apart (`warmup_rss_mb`) from the growth during the measured run."""
@@ -89,16 +103,21 @@ def run_load(probe, graph: dict[str, NodeProcess], duration_s: float, warmup_mes
     started = time.monotonic()
     warm = probe.wait_until(lambda: watch.totals()["reconstruction"] > 0, warmup_timeout_s, poll_s=0.2)
     first_meshes_rss = {k: round(p.rss_mb(), 1) for k, p in graph.items()}
-    warm = warm and probe.wait_until(lambda: watch.totals()["reconstruction"] >= warmup_meshes, warmup_timeout_s,
-                                     poll_s=0.2)
+    warm = warm and probe.wait_until(
+        lambda: watch.totals()["reconstruction"] >= warmup_meshes, warmup_timeout_s, poll_s=0.2
+    )
     warmup_s = time.monotonic() - started
     samples = []
     begin = time.monotonic()
     first_totals = watch.totals()
     while time.monotonic() - begin < duration_s:
-        samples.append({"t_s": round(time.monotonic() - begin, 2),
-                        **{f"rss_mb_{k}": round(p.rss_mb(), 1) for k, p in graph.items()},
-                        **{f"count_{k}": v for k, v in watch.totals().items()}})
+        samples.append(
+            {
+                "t_s": round(time.monotonic() - begin, 2),
+                **{f"rss_mb_{k}": round(p.rss_mb(), 1) for k, p in graph.items()},
+                **{f"count_{k}": v for k, v in watch.totals().items()},
+            }
+        )
         if progress is not None:
             progress(samples[-1])
         time.sleep(sample_period_s)
@@ -108,10 +127,13 @@ def run_load(probe, graph: dict[str, NodeProcess], duration_s: float, warmup_mes
     memory = {}
     for key in graph:
         series = [s[f"rss_mb_{key}"] for s in samples if np.isfinite(s[f"rss_mb_{key}"])]
-        memory[key] = {"at_first_meshes_mb": first_meshes_rss[key],
-                       "start_mb": series[0] if series else None, "end_mb": series[-1] if series else None,
-                       "growth_mb": round(series[-1] - series[0], 1) if series else None,
-                       "max_growth_mb": round(max(series) - series[0], 1) if series else None}
+        memory[key] = {
+            "at_first_meshes_mb": first_meshes_rss[key],
+            "start_mb": series[0] if series else None,
+            "end_mb": series[-1] if series else None,
+            "growth_mb": round(series[-1] - series[0], 1) if series else None,
+            "max_growth_mb": round(max(series) - series[0], 1) if series else None,
+        }
     lag = {}
     for stage, values in watch.lags.items():
         in_run = [v for t, v in values if t >= begin and np.isfinite(v)]
@@ -123,20 +145,39 @@ def run_load(probe, graph: dict[str, NodeProcess], duration_s: float, warmup_mes
             "first_third_median_s": round(float(np.median(in_run[:third])), 3) if in_run else None,
             "last_third_median_s": round(float(np.median(in_run[-third:])), 3) if in_run else None,
         }
-    diagnostics = {k: probe.diagnostic(name) for k, name in
-                   [("segmentation", "segmentation_node"), ("reconstruction", "reconstruction_node"),
-                    ("planner", "plan_node"), ("replay", "bag_replayer")]}
+    diagnostics = {
+        k: probe.diagnostic(name)
+        for k, name in [
+            ("segmentation", "segmentation_node"),
+            ("reconstruction", "reconstruction_node"),
+            ("planner", "plan_node"),
+            ("replay", "bag_replayer"),
+        ]
+    }
     return {
-        "warm": warm, "warmup_s": round(warmup_s, 1), "warmup_meshes": warmup_meshes, "duration_s": round(elapsed, 1),
-        "rates_hz": rates, "lag": lag, "memory": memory, "samples": samples,
+        "warm": warm,
+        "warmup_s": round(warmup_s, 1),
+        "warmup_meshes": warmup_meshes,
+        "duration_s": round(elapsed, 1),
+        "rates_hz": rates,
+        "lag": lag,
+        "memory": memory,
+        "samples": samples,
         "alive": {k: p.alive() for k, p in graph.items()},
         "diagnostics": {k: {kk: vv for kk, vv in v.items() if not kk.startswith("_")} for k, v in diagnostics.items()},
         "watch": watch,
     }
 
 
-def run_fault(probe, graph: dict[str, NodeProcess], watch: GraphWatch, restart, outage_s: float = 5.0,
-              resume_timeout_s: float = 180.0, goal_timeout_s: float = 120.0) -> dict:
+def run_fault(
+    probe,
+    graph: dict[str, NodeProcess],
+    watch: GraphWatch,
+    restart,
+    outage_s: float = 5.0,
+    resume_timeout_s: float = 180.0,
+    goal_timeout_s: float = 120.0,
+) -> dict:
     """kill -9 the reconstruction node; during the outage the planner must keep the last meshes and
     still plan on them; after `restart()` (returns the new NodeProcess) new meshes must flow again."""
     from rclpy.action import ActionClient
@@ -173,7 +214,8 @@ def run_fault(probe, graph: dict[str, NodeProcess], watch: GraphWatch, restart, 
     graph["reconstruction"] = restart()
     restarted_at = time.monotonic()
     resumed = probe.wait_until(
-        lambda: (m := watch.last_meshes()) is not None and stamp_of(m) > before_stamp, resume_timeout_s, poll_s=0.2)
+        lambda: (m := watch.last_meshes()) is not None and stamp_of(m) > before_stamp, resume_timeout_s, poll_s=0.2
+    )
     return {
         "killed_exit_code": killed_code,
         "outage_s": round(restarted_at - killed_at, 1),
