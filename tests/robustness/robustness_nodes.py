@@ -4,21 +4,16 @@ The reconstruction node runs with the shipped checkpoint (ARM_ROBUSTNESS_CHECKPO
 ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..." adds parameters); tests that need it skip without one.
 """
 
-import os
-
 import pytest
 
-from arm_sim.robustness import NodeProcess, node_built, reconstruction_checkpoint
+from arm_sim import robustness
+from arm_sim.robustness import NodeProcess, node_built
 
 
 def reconstruction_params() -> dict:
-    checkpoint = reconstruction_checkpoint()
-    if checkpoint is None:
+    params = robustness.reconstruction_params()
+    if params is None:
         pytest.skip("no reconstruction checkpoint yet (src/arm_reconstruction/arm_reconstruction/checkpoints/arm.pt)")
-    params = {"checkpoint_path": str(checkpoint)}
-    for item in os.environ.get("ARM_ROBUSTNESS_RECON_PARAMS", "").split():
-        name, value = item.split(":=")
-        params[name] = float(value) if value.replace(".", "", 1).isdigit() else value
     return params
 
 

@@ -20,7 +20,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.utilities import remove_ros_args
 
 from arm_sim.bags import BagError, BagWriter, QosSpec, message_class
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, spin_node
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, run_node
 
 DEFAULT_TOPICS = [
     "camera/color/image_raw",
@@ -151,7 +151,7 @@ def main(args=None) -> int:
         print("usage: record [OUTPUT_DIR] [--ros-args -p storage:=mcap|sqlite3 -p topics:=[...] ...]")
         return 2
     overrides = [Parameter("output", value=argv[0])] if argv else []
-    return spin_node(lambda: BagRecorder(parameter_overrides=overrides), args)
+    return run_node(lambda: BagRecorder(parameter_overrides=overrides), args)
 
 
 if __name__ == "__main__":

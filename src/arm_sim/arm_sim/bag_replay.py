@@ -37,7 +37,7 @@ from arm_sim.bags import (
     ns_to_time,
     shift_stamps,
 )
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, spin_until_shutdown
 
 FRAME_TOPICS = [
     "camera/color/image_raw",
@@ -119,6 +119,7 @@ class BagReplayer(Node):
             except BagError as error:
                 raise ValueError(str(error)) from None
             self.create_subscription(consumed_cls, consumed_topic, self.on_consumed, qos)
+        self.consumed_topic = self.resolve_topic_name(consumed_topic)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.published = {t: 0 for t in self.topics}
         self.frames_published = self.frames_consumed = self.frames_timed_out = self.corrupt = 0
@@ -160,9 +161,15 @@ class BagReplayer(Node):
         return False
 
     def _wait_for_subscribers(self) -> None:
+        """Wait (at most wait_subscribers_s) for a subscriber on every replayed topic and, in mode
+        consumed, for the publisher of consumed_topic: the end of the chain is up, then give the
+        links in between one second to match."""
         deadline = time.monotonic() + self.wait_subscribers_s
         while time.monotonic() < deadline and rclpy.ok(context=self.context):
-            if all(p.get_subscription_count() > 0 for p in self.publishers_by_topic.values()):
+            subscribed = all(p.get_subscription_count() > 0 for p in self.publishers_by_topic.values())
+            if subscribed and (self.mode != "consumed" or self.count_publishers(self.consumed_topic) > 0):
+                if self.mode == "consumed":
+                    time.sleep(1.0)
                 return
             time.sleep(0.05)
 
@@ -259,13 +266,6 @@ class BagReplayer(Node):
         return text
 
 
-def _spin(executor) -> None:
-    try:
-        executor.spin()
-    except (ExternalShutdownException, KeyboardInterrupt):
-        pass
-
-
 def main(args=None) -> int:
     argv = remove_ros_args(args=sys.argv if args is None else args)[1:]
     if len(argv) > 1 or (argv and argv[0].startswith("-")):
@@ -279,7 +279,7 @@ def main(args=None) -> int:
         node = BagReplayer(parameter_overrides=overrides)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
+        spinner = threading.Thread(target=spin_until_shutdown, args=(executor,), daemon=True)
         spinner.start()
         node.play()
         print(node.summary(), flush=True)
@@ -293,6 +293,9 @@ def main(args=None) -> int:
     except (ValueError, ParameterException) as error:
         print(f"[bag_replayer] invalid configuration: {error}", flush=True)
         code = 2
+    except Exception:  # a publish that SIGINT/SIGTERM caught in flight
+        if rclpy.ok():
+            raise
     finally:
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)

@@ -69,6 +69,23 @@ def reconstruction_checkpoint() -> pathlib.Path | None:
     return path if path.exists() else None
 
 
+def reconstruction_params() -> dict | None:
+    """Parameters of the reconstruction node in robustness runs: its checkpoint (see
+    reconstruction_checkpoint) plus ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..."; None without a
+    checkpoint."""
+    checkpoint = reconstruction_checkpoint()
+    if checkpoint is None:
+        return None
+    params = {"checkpoint_path": str(checkpoint)}
+    for item in os.environ.get("ARM_ROBUSTNESS_RECON_PARAMS", "").split():
+        name, value = item.split(":=", 1)
+        try:
+            params[name] = int(value) if value.lstrip("-").isdigit() else float(value)
+        except ValueError:
+            params[name] = value
+    return params
+
+
 def rss_mb(pid: int) -> float:
     """Resident set size of a process, MiB (nan once it is gone)."""
     try:

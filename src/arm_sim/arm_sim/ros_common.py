@@ -112,3 +112,50 @@ def spin_node(node_factory, args=None, executor_factory=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def spin_until_shutdown(executor) -> None:
+    """executor.spin() until SIGINT/SIGTERM, returning quietly also when the shutdown caught a take or
+    a callback in flight (rclpy then raises RCLError / RuntimeError from that call)."""
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if executor.context.ok():
+            raise
+
+
+def run_node(node_factory, args=None, executor_factory=None) -> int:
+    """spin_node with two more guarantees: an invalid parameter value or type (rclpy's
+    ParameterException, raised by declare_parameter on a range or type violation) exits with code 2
+    and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
+    or take in flight end the process cleanly (exit code 0)."""
+    from rclpy.exceptions import ParameterException
+    from rclpy.executors import SingleThreadedExecutor
+
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = node_factory()
+        executor = executor_factory() if executor_factory is not None else SingleThreadedExecutor()
+        executor.add_node(node)
+        spin_until_shutdown(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as error:
+        name = node.get_name() if node is not None else "node"
+        print(f"[{name}] invalid configuration: {error}", flush=True)
+        code = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
