@@ -176,6 +176,17 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
     return row | {"success": bool(success), "error_m": error, "seconds": time.perf_counter() - started}
 
 
+def _json_safe(value):
+    """NaN (no data) -> null, so summary.json is strict JSON."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def load_done(path: pathlib.Path) -> dict:
     done = {}
     if path.exists():
@@ -279,10 +290,10 @@ def main(argv=None) -> int:
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
     summary = summarise(rows, args.methods, args.tasks, BINS, n)
     summary["settings"] = settings
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "summary.json").write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)
     write_report(summary, out)
-    print(json.dumps({m: round(v["success"], 3) for m, v in summary["methods"].items()}))
+    print(json.dumps(_json_safe({m: round(v["success"], 3) for m, v in summary["methods"].items()})))
     print(f"[bench_manip] wrote {out / 'summary.json'}, {out / 'report.md'} and plots")
     return 0
 

@@ -95,6 +95,7 @@ def write_plots(rows, summary, methods, bins, out: pathlib.Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    methods = [m for m in methods if summary["methods"][m]["n"] > 0] or list(methods)
     labels = [bin_label(b) for b in bins]
     x = np.arange(len(labels))
     fig, ax = plt.subplots(figsize=(9, 4.5))
