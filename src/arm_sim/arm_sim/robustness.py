@@ -298,6 +298,27 @@ class Probe:
         except ValueError:
             return default
 
+    def in_executor(self, fn, timeout_s: float = 10.0):
+        """Run fn() on the executor thread and return its value. rclpy's ActionClient is not thread
+        safe: a goal or result response taken between send_*_request and the registration of its
+        future is dropped ('Ignoring unexpected goal response'), so requests go out from there."""
+        done, out = threading.Event(), {}
+
+        def task():
+            try:
+                out["value"] = fn()
+            except Exception as error:  # handed back to the caller
+                out["error"] = error
+            finally:
+                done.set()
+
+        self.executor.create_task(task)
+        if not done.wait(timeout_s):
+            raise TimeoutError("the probe's executor did not run the task")
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
+
     def wait_until(self, predicate, timeout_s: float, poll_s: float = 0.05) -> bool:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:

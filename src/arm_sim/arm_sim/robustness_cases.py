@@ -575,13 +575,13 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
         started = time.monotonic()
         g = Manipulate.Goal(task=task, target_id=target_id, tolerance_m=tolerance_m)
         g.goal_displacement.x, g.goal_displacement.y, g.goal_displacement.z = displacement
-        handle_future = action.send_goal_async(g)
+        handle_future = probe.in_executor(lambda: action.send_goal_async(g))
         if not probe.wait_until(handle_future.done, 30.0):
             return {"answered": False, "message": "no goal response"}
         handle = handle_future.result()
         if not handle.accepted:
             return {"answered": True, "accepted": False, "planned": False, "message": "rejected"}
-        result_future = handle.get_result_async()
+        result_future = probe.in_executor(handle.get_result_async)
         if not probe.wait_until(result_future.done, goal_timeout_s):
             return {"answered": False, "message": "no result"}
         result = result_future.result()
@@ -731,3 +731,48 @@ def run_sim_bad_inputs(probe, process, settle_s: float = 2.0) -> dict:
     return _finish_report(
         node, process, results, invalid, {"subscribers_matched": ready, "joint_states_checked": received}
     )
+
+
+# --- parameters at start-up ------------------------------------------------------------------------
+PARAMETER_CASES = [
+    ("segmentation", "sync_queue_size", 0, "range"),
+    ("segmentation", "image_reliability", "sometimes", "choice"),
+    ("reconstruction", "k", 100.0, "range"),
+    ("reconstruction", "method", "magic", "choice"),
+    ("planner", "num_paths", 1, "range"),
+    ("planner", "steps", "many", "type"),
+    ("sim", "n_objects", 99, "range"),
+    ("sim", "split", "test", "choice"),
+]
+
+
+def run_parameter_validation(log_dir, timeout_s: float = 60.0) -> list[dict]:
+    """Start every node with one invalid parameter (all at once); each must exit with code 2, name the
+    parameter and print no traceback."""
+    from arm_sim.robustness import NodeProcess, node_built
+
+    started = []
+    for i, (key, name, value, _) in enumerate(PARAMETER_CASES):
+        if node_built(key):
+            process = NodeProcess(key, log_dir / f"params_{i}" / f"{key}.log", params={name: value})
+            started.append((i, process))
+    results = []
+    for i, process in started:
+        key, name, value, kind = PARAMETER_CASES[i]
+        code = process.wait(timeout_s)
+        if code is None:
+            process.stop()
+        log = process.log()
+        results.append(
+            {
+                "node": key,
+                "parameter": name,
+                "value": value,
+                "kind": kind,
+                "exit_code": code,
+                "names_parameter": name in log,
+                "tracebacks": tracebacks(log),
+                "ok": code == 2 and name in log and not tracebacks(log),
+            }
+        )
+    return results

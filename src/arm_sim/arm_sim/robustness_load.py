@@ -201,11 +201,11 @@ def run_fault(
         action = ActionClient(probe.node, Manipulate, "arm/manipulate")
         if action.wait_for_server(timeout_sec=30.0):
             goal = Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=int(last.objects[0].id))
-            handle_future = action.send_goal_async(goal)
+            handle_future = probe.in_executor(lambda: action.send_goal_async(goal))
             probe.wait_until(handle_future.done, 30.0)
             goal_result = {"sent": True, "target_id": int(last.objects[0].id)}
             if handle_future.done() and handle_future.result().accepted:
-                result_future = handle_future.result().get_result_async()
+                result_future = probe.in_executor(handle_future.result().get_result_async)
                 probe.wait_until(result_future.done, goal_timeout_s)
                 if result_future.done():
                     result = result_future.result()
