@@ -30,7 +30,7 @@ from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession, Outcome
 from arm_sim.conversions import ConversionError
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, spin_node
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
 
 
 def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
@@ -284,7 +284,7 @@ class PlanNode(Node):
 
 
 def main(args=None) -> int:
-    return spin_node(PlanNode, args, executor_factory=lambda: MultiThreadedExecutor(num_threads=3))
+    return run_node(PlanNode, args, executor_factory=lambda: MultiThreadedExecutor(num_threads=3))
 
 
 if __name__ == "__main__":
