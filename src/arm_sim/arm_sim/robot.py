@@ -125,9 +125,9 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
             mass=0.02, rgba=[0.2, 0.2, 0.2, 1], friction=[1.5, 0.02, 0.002], condim=4,
             contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY,
         )
-    spec.add_equality(
+    spec.add_equality(  # a stiff coupling keeps the fingers symmetric under grasp loads
         type=mujoco.mjtEq.mjEQ_JOINT, name1=FINGER_JOINT_NAMES[0], name2=FINGER_JOINT_NAMES[1],
-        data=[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+        data=[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], solref=[0.005, 1.0], solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
     )
     for i, name in enumerate(JOINT_NAMES):
         kp = JOINT_KP[i]
