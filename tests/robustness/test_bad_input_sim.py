@@ -41,9 +41,6 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(
-    strict=False, reason="sim_node accepts out-of-choice string parameters (split, image_reliability) at run time"
-)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

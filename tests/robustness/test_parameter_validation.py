@@ -4,12 +4,6 @@ import pytest
 
 from arm_sim.robustness_cases import PARAMETER_CASES, run_parameter_validation
 
-SPIN_NODE_GAP = (
-    "arm_sim/ros_common.py spin_node catches ValueError only: rclpy's InvalidParameterValueException/"
-    "InvalidParameterTypeException (range and type violations) escape as a traceback, exit code 1 "
-    "(ros_common.run_node handles them)"
-)
-
 
 @pytest.fixture(scope="module")
 def outcomes(robustness_logs):
@@ -17,12 +11,10 @@ def outcomes(robustness_logs):
 
 
 @pytest.mark.parametrize("case", PARAMETER_CASES, ids=[f"{k}-{n}-{kind}" for k, n, _, kind in PARAMETER_CASES])
-def test_invalid_parameter_is_refused_at_start_up(outcomes, case, request):
+def test_invalid_parameter_is_refused_at_start_up(outcomes, case):
     key, name, value, kind = case
     if (key, name) not in outcomes:
         pytest.skip(f"{key} is not built")
-    if kind in ("range", "type"):
-        request.applymarker(pytest.mark.xfail(strict=False, reason=SPIN_NODE_GAP))
     outcome = outcomes[(key, name)]
     assert outcome["exit_code"] is not None, f"{key} kept running with {name}={value!r}"
     assert outcome["ok"], outcome

@@ -23,8 +23,8 @@ from arm_sim.ros_common import (
     diagnostics_msg,
     latched_qos,
     reject_invalid_choices,
+    run_node,
     sensor_qos,
-    spin_node,
 )
 
 from .checkpoint import CheckpointError
@@ -175,7 +175,7 @@ def _make_node() -> ReconstructionNode:
 
 
 def main(args=None) -> int:
-    return spin_node(_make_node, args)
+    return run_node(_make_node, args)
 
 
 if __name__ == "__main__":

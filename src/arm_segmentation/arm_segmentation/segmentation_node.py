@@ -15,7 +15,7 @@ from arm_segmentation.frame_processing import FrameError, segment_messages
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
 from arm_segmentation.table_plane import TableParams
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, sensor_qos, spin_node
+from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
 
 INPUTS = ("rgb", "depth", "camera_info", "pose", "labels")
 
@@ -123,7 +123,7 @@ class SegmentationNode(Node):
 
 
 def main(args=None) -> int:
-    return spin_node(SegmentationNode, args)
+    return run_node(SegmentationNode, args)
 
 
 if __name__ == "__main__":

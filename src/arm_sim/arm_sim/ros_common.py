@@ -86,34 +86,6 @@ def diagnostics_msg(node, name: str, values: dict, level=DiagnosticStatus.OK, me
     return array
 
 
-def spin_node(node_factory, args=None, executor_factory=None) -> int:
-    """Run a node until SIGINT/SIGTERM and shut down cleanly. Returns the process exit code."""
-    rclpy.init(args=args)  # installs rclpy's SIGINT/SIGTERM handlers: spin then raises ExternalShutdownException
-    node = None
-    code = 0
-    try:
-        node = node_factory()
-        if executor_factory is None:
-            rclpy.spin(node)
-        else:
-            executor = executor_factory()
-            executor.add_node(node)
-            executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as error:  # invalid parameters: a clear message, a non-zero exit
-        print(f"[{getattr(node, 'get_name', lambda: 'node')()}] invalid configuration: {error}", flush=True)
-        code = 2
-    finally:
-        if node is not None:
-            close = getattr(node, "close", None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
-
-
 def spin_until_shutdown(executor) -> None:
     """executor.spin() until SIGINT/SIGTERM, returning quietly also when the shutdown caught a take or
     a callback in flight (rclpy then raises RCLError / RuntimeError from that call)."""
@@ -127,7 +99,8 @@ def spin_until_shutdown(executor) -> None:
 
 
 def run_node(node_factory, args=None, executor_factory=None) -> int:
-    """spin_node with two more guarantees: an invalid parameter value or type (rclpy's
+    """Run a node until SIGINT/SIGTERM and shut down cleanly; returns the exit code. An invalid
+    parameter value or type (rclpy's
     ParameterException, raised by declare_parameter on a range or type violation) exits with code 2
     and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
     or take in flight end the process cleanly (exit code 0)."""

@@ -15,7 +15,15 @@ from arm_interfaces.msg import ReconstructedObjectArray
 from arm_sim import robot
 from arm_sim.conversions import camera_info_from_K, matrix_to_pose, numpy_to_image, reconstructed_object_msg
 from arm_sim.core import SimSession, trajectory_targets
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, sensor_qos, spin_node
+from arm_sim.ros_common import (
+    RateLimitedErrors,
+    declare,
+    diagnostics_msg,
+    latched_qos,
+    reject_invalid_choices,
+    run_node,
+    sensor_qos,
+)
 
 
 class SimNode(Node):
@@ -37,6 +45,7 @@ class SimNode(Node):
         self.camera_frame = declare(self, "camera_frame_id", "camera_color_optical_frame", "Optical frame id")
         reliability = declare(self, "image_reliability", "reliable", "Image QoS reliability",
                               choices=["reliable", "best_effort"])
+        reject_invalid_choices(self, {"split": ["train", "heldout"], "image_reliability": ["reliable", "best_effort"]})
         if len(eye) != 3 or len(target) != 3 or not np.all(np.isfinite(eye + target)):
             raise ValueError("camera_eye and camera_target must be 3 finite numbers each")
 
@@ -135,7 +144,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    raise SystemExit(spin_node(SimNode, args))
+    raise SystemExit(run_node(SimNode, args))
 
 
 if __name__ == "__main__":
