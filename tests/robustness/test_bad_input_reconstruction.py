@@ -41,9 +41,8 @@ def test_every_frame_is_accounted_for(run):
     counters = report["counters"]
     assert counters["frames_received"] == report["frames_sent"], counters
     assert counters["frames_rejected"] >= report["rejects_expected"], counters
-    assert (
-        counters["frames_processed"] + counters["frames_rejected"] + counters["frames_dropped"] == report["frames_sent"]
-    ), counters
+    accounted = counters["frames_processed"] + counters["frames_rejected"] + counters["frames_dropped"]
+    assert accounted == report["frames_sent"], (counters, report["cases"])
 
 
 def test_rejections_are_logged_and_rate_limited(run):
@@ -72,11 +71,6 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="reconstruction_node rejects bad 'method'/'device' at run time but accepts "
-    "out-of-choice 'decomposition.method' and 'frame_reliability'",
-)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

@@ -68,11 +68,6 @@ def test_parameters_are_declared_with_descriptors_and_ranges(run):
     assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="segmentation_node accepts out-of-choice string parameters at run time "
-    "(no on_set_parameters callback for image_reliability)",
-)
 def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 

@@ -22,7 +22,6 @@ from arm_sim.ros_common import (
     declare,
     diagnostics_msg,
     latched_qos,
-    reject_invalid_choices,
     run_node,
     sensor_qos,
 )
@@ -67,7 +66,6 @@ class ReconstructionNode(Node):
             choices=["reliable", "best_effort"],
         )
         self.marker_alpha = declare(self, "marker_alpha", 0.8, "Marker opacity", 0.0, 1.0)
-        reject_invalid_choices(self, {"method": sorted(METHODS), "device": ["cpu", "cuda", "auto"]})
 
         settings = ReconstructionSettings(
             method=method,

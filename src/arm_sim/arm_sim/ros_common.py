@@ -30,7 +30,8 @@ def latched_qos(depth: int = 1) -> QoSProfile:
 
 
 def declare(node, name: str, default, description: str, low=None, high=None, choices=None):
-    """Declare a parameter with a descriptor (and range) and return its value, validated."""
+    """Declare a parameter with a descriptor (and range) and return its value, validated. A parameter
+    with choices is also checked whenever it is set at run time (out-of-choice values are refused)."""
     descriptor = ParameterDescriptor(description=description)
     if low is not None and isinstance(default, bool) is False:
         if isinstance(default, int):
@@ -41,23 +42,27 @@ def declare(node, name: str, default, description: str, low=None, high=None, cho
             ]
     if choices:
         descriptor.additional_constraints = "one of: " + ", ".join(choices)
+        _register_choices(node, name, list(choices))
     value = node.declare_parameter(name, default, descriptor).value
     if choices and value not in choices:
         raise ValueError(f"parameter '{name}'='{value}' is not one of {choices}")
     return value
 
 
-def reject_invalid_choices(node, choices_by_name: dict):
-    """Add a parameter callback that rejects values outside each parameter's choices at run time."""
+def _register_choices(node, name: str, choices: list) -> None:
+    registry = getattr(node, "_arm_parameter_choices", None)
+    if registry is None:
+        registry = node._arm_parameter_choices = {}
 
-    def check(params):
-        for p in params:
-            allowed = choices_by_name.get(p.name)
-            if allowed and p.value not in allowed:
-                return SetParametersResult(successful=False, reason=f"{p.name} must be one of {allowed}")
-        return SetParametersResult(successful=True)
+        def check(params):
+            for p in params:
+                allowed = registry.get(p.name)
+                if allowed and p.value not in allowed:
+                    return SetParametersResult(successful=False, reason=f"{p.name} must be one of {allowed}")
+            return SetParametersResult(successful=True)
 
-    node.add_on_set_parameters_callback(check)
+        node.add_on_set_parameters_callback(check)
+    registry[name] = choices
 
 
 class RateLimitedErrors:

@@ -20,7 +20,6 @@ from arm_sim.ros_common import (
     declare,
     diagnostics_msg,
     latched_qos,
-    reject_invalid_choices,
     run_node,
     sensor_qos,
 )
@@ -45,7 +44,6 @@ class SimNode(Node):
         self.camera_frame = declare(self, "camera_frame_id", "camera_color_optical_frame", "Optical frame id")
         reliability = declare(self, "image_reliability", "reliable", "Image QoS reliability",
                               choices=["reliable", "best_effort"])
-        reject_invalid_choices(self, {"split": ["train", "heldout"], "image_reliability": ["reliable", "best_effort"]})
         if len(eye) != 3 or len(target) != 3 or not np.all(np.isfinite(eye + target)):
             raise ValueError("camera_eye and camera_target must be 3 finite numbers each")
 
