@@ -29,7 +29,8 @@ _PRIORS = {
 
 def model_card(checkpoint_path, note: str = "") -> str:
     """Markdown model card of one checkpoint."""
-    payload = read_checkpoint(checkpoint_path)
+    path = pathlib.Path(checkpoint_path)
+    payload = read_checkpoint(path)
     config, extra = payload["config"], payload.get("extra", {})
     training = config.get("training", {})
     metrics = extra.get("heldout_metrics", {})
@@ -41,7 +42,7 @@ def model_card(checkpoint_path, note: str = "") -> str:
         "",
         "| | |",
         "| --- | --- |",
-        f"| file | `{pathlib.Path(checkpoint_path).name}` ({pathlib.Path(checkpoint_path).stat().st_size / 1e6:.1f} MB) |",
+        f"| file | `{path.name}` ({path.stat().st_size / 1e6:.1f} MB) |",
         f"| network | {config['architecture']}, {config['in_channels']} input channels, "
         f"{config['resolution']}^3 grid, {config['base_channels']} base channels, weights stored as "
         f"{extra.get('weights_dtype', 'float32')} |",

@@ -229,10 +229,13 @@ class _StopFlag:
 
     def __init__(self):
         self.stop = False
-        signal.signal(signal.SIGTERM, self._handler)
+        self._previous = signal.signal(signal.SIGTERM, self._handler)
 
     def _handler(self, signum, frame):
         self.stop = True
+
+    def restore(self) -> None:
+        signal.signal(signal.SIGTERM, self._previous)
 
 
 def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict:
@@ -326,6 +329,7 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
         stop.stop = True
     finally:
         bar.close()
+        stop.restore()
         save_state()
     if stop.stop or step < config.steps and not config.time_limit_min:
         return {"interrupted": True, "step": step}
