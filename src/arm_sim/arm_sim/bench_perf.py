@@ -11,7 +11,13 @@ import pathlib
 import platform
 import time
 
-PERF_MODULES = ("arm_sim.perf", "arm_segmentation.perf", "arm_reconstruction.perf", "arm_planner.perf")
+PERF_MEASUREMENTS = (
+    ("arm_sim.perf", "measure"),
+    ("arm_segmentation.perf", "measure"),
+    ("arm_reconstruction.perf", "measure"),
+    ("arm_reconstruction.train", "measure_training"),
+    ("arm_planner.perf", "measure"),
+)
 
 
 def merge_summary(path: pathlib.Path, figures: dict) -> dict:
@@ -31,7 +37,7 @@ def main(argv=None) -> int:
     figures = {"machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, python {platform.python_version()}",
                "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S")}
     figures["cpu_count"] = os.cpu_count()
-    for name in PERF_MODULES:
+    for name, function in PERF_MEASUREMENTS:
         if args.only and name not in args.only and name.split(".")[0] not in args.only:
             continue
         try:
@@ -40,7 +46,7 @@ def main(argv=None) -> int:
             print(f"[bench_perf] skipping {name}: {error}")
             continue
         print(f"[bench_perf] measuring {name} ...", flush=True)
-        result = module.measure()
+        result = getattr(module, function)()
         figures.update(result)
         print(json.dumps({k: (round(v, 4) if isinstance(v, float) else v) for k, v in result.items()}), flush=True)
     summary = merge_summary(out / "summary.json", figures)
