@@ -39,7 +39,7 @@ from arm_sim.conversions import (  # noqa: E402
 from arm_sim.objects import ObjectModel  # noqa: E402
 from arm_sim.ros_common import latched_qos, sensor_qos  # noqa: E402
 from arm_sim.scenes import PlacedObject, Scene  # noqa: E402
-from arm_sim.world import SimWorld  # noqa: E402
+from arm_sim.world import ROBOT_BASE_XY, SimWorld  # noqa: E402
 
 from bringup import Graph, node_available  # noqa: E402
 
@@ -129,6 +129,7 @@ def main() -> int:
     parser.add_argument("--out", default=str(ROOT / "results" / "demo"))
     parser.add_argument("--task", choices=["grasp", "push", "rearrange"], default="grasp")
     parser.add_argument("--ground-truth-masks", action="store_true", help="segmentation passes the sim's masks through")
+    parser.add_argument("--method", default=None, help="reconstruction method (default: the node's, 'arm')")
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -142,6 +143,8 @@ def main() -> int:
         stages = [k for k in ("segmentation", "reconstruction", "planner") if node_available(k)]
         for key in stages:
             extra = ["-p", "use_ground_truth_masks:=true"] if key == "segmentation" and args.ground_truth_masks else []
+            if key == "reconstruction" and args.method:
+                extra = ["-p", f"method:={args.method}"]
             graph.start(key, *extra)
         summary["stages"] = {k: ("running" if k in stages or k == "sim" else "not built")
                              for k in ("sim", "segmentation", "reconstruction", "planner")}
@@ -236,7 +239,9 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     client = ActionClient(node, Manipulate, "arm/manipulate")
     if not client.wait_for_server(timeout_sec=60.0):
         return {"error": "plan_node action server not available"}
-    target = max(meshes.objects, key=lambda o: o.visible_fraction)
+    shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
+    reachable = [o for o in meshes.objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < 0.7]
+    target = max(reachable or meshes.objects, key=lambda o: o.visible_fraction)
     goal = Manipulate.Goal(task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id)
     if task == "push":
         goal.goal_displacement.x, goal.goal_displacement.y = 0.05, -0.30
