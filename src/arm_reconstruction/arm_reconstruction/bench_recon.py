@@ -67,7 +67,7 @@ TARGET_RUNTIME_S = 900.0
 
 @dataclasses.dataclass(frozen=True)
 class BenchConfig:
-    scenes: int = 24
+    scenes: int = 36
     seed: int = 0
     objects: str = ""
     segmentation: str = "ground-truth"
@@ -633,9 +633,14 @@ def plot_stability(summary: dict, path: pathlib.Path) -> None:
     axes[0].set_ylabel(f"fraction moved < {summary['config']['stable_threshold_m'] * 100:.0f} cm "
                        f"in {summary['config']['settle_s']:.0f} s")
     axes[0].set_ylim(0, 1.05)
-    moved = np.array([summary["methods"][n]["displacement_m_mean"] or 0.0 for n in names]) * 100
-    axes[1].bar(names, moved, color=colours)
-    axes[1].set_ylabel("mean displacement of the object centre (cm)")
+    median = np.array([summary["methods"][n]["displacement_m_median"] or 0.0 for n in names]) * 100
+    mean = np.array([summary["methods"][n]["displacement_m_mean"] or 0.0 for n in names]) * 100
+    axes[1].bar(names, np.maximum(median, 1e-3), color=colours, label="median")
+    axes[1].scatter(names, np.maximum(mean, 1e-3), color="black", marker="_", s=400, label="mean", zorder=3)
+    axes[1].axhline(summary["config"]["stable_threshold_m"] * 100, color="grey", linestyle="--", linewidth=1)
+    axes[1].set_yscale("log")
+    axes[1].set_ylabel("displacement of the object's centre of mass (cm)")
+    axes[1].legend()
     for ax in axes:
         ax.tick_params(axis="x", rotation=35)
         ax.grid(alpha=0.3, axis="y")
@@ -752,7 +757,7 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         "**Chamfer distance** (metres, reported in mm): N = "
         f"{cfg['chamfer_samples']} points sampled uniformly by area on the reconstructed surface (A) and on the "
         "true surface (B); CD = 0.5 * (mean over a in A of min over b in B of |a - b| + mean over b in B of min over "
-        "a in A of |a - b|). **IoU**: voxel centres inside each watertight mesh in a "
+        "a in A of |a - b|). **IoU**: voxel centres inside each closed mesh in a "
         f"{cfg['iou_resolution']}^3 cube enclosing both. **Stability**: each method's objects of a view are built "
         "into a MuJoCo scene from convex parts as the planner's twin builds them (table, no robot), simulated "
         f"{cfg['settle_s']:g} s under gravity (step {cfg['physics_timestep_s']:g} s, the twin's); stable = the "
@@ -762,7 +767,7 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         "Wilson for fractions).", "",
         "## Overall", "",
         "| method | objects | empty | Chamfer mm (90% CI) | median mm | IoU | stable fraction (90% CI) "
-        "| mean displacement cm | s/scene |",
+        "| displacement cm, median / mean | s/scene |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for name in ok:
@@ -771,9 +776,9 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         chamfer = "-" if m["chamfer_m"] is None else f"{m['chamfer_m'] * 1000:.2f} ({low}-{high})"
         stable = "-" if m["stable_fraction"] is None else \
             f"{m['stable_fraction']:.3f} ({_fmt(m['stable_ci90'][0])}-{_fmt(m['stable_ci90'][1])})"
+        moved = f"{_fmt(m['displacement_m_median'], 100, 2)} / {_fmt(m['displacement_m_mean'], 100, 2)}"
         lines.append(f"| {name} | {m['n']} | {m['n_empty']} | {chamfer} | {_fmt(m.get('chamfer_m_median'), 1000, 2)} "
-                     f"| {_fmt(m['iou'])} | {stable} | {_fmt(m['displacement_m_mean'], 100, 2)} "
-                     f"| {_fmt(m['seconds_per_scene'], 1, 1)} |")
+                     f"| {_fmt(m['iou'])} | {stable} | {moved} | {_fmt(m['seconds_per_scene'], 1, 1)} |")
     sim_parts = methods.get(GROUND_TRUTH, {}).get("simulator_parts")
     if sim_parts and sim_parts["stable_fraction"] is not None:
         low, high = (_fmt(v) for v in sim_parts["stable_ci90"])
