@@ -14,7 +14,7 @@ test: setup
 	@$(ENV) && python -m pytest -q -p no:cacheprovider src tests $(ARGS)
 
 lint: setup
-	@$(ENV) && ruff check src tests scripts
+	@$(ENV) && ruff check src tests scripts launch
 
 bench-perf: setup
 	@$(ENV) && bench_perf $(ARGS)
