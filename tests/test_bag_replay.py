@@ -2,6 +2,10 @@
 through fresh segmentation + reconstruction nodes: the meshes of every frame both runs
 reconstructed are the same."""
 
+import pathlib
+import shutil
+import tempfile
+
 import numpy as np
 import pytest
 
@@ -26,6 +30,14 @@ def recon_params():
     return params
 
 
+@pytest.fixture
+def work_dir():
+    """Bag and node logs, outside pytest's shared basetemp (other sessions prune it during long runs)."""
+    path = pathlib.Path(tempfile.mkdtemp(prefix="arm_bag_replay_"))
+    yield path
+    shutil.rmtree(path, ignore_errors=True)
+
+
 def pipeline(log_dir, recon_params):
     return [
         NodeProcess("segmentation", log_dir / "segmentation.log", params={"image_reliability": "reliable"}),
@@ -37,25 +49,27 @@ def meshes_by_stamp(store) -> dict[float, ReconstructedObjectArray]:
     return {round(stamp_of(m), 6): m for m in list(store)}
 
 
-def test_replayed_bag_reproduces_the_live_meshes(tmp_path, recon_params):
+def test_replayed_bag_reproduces_the_live_meshes(work_dir, recon_params):
     probe = Probe()
-    bag = tmp_path / "demo_bag"
+    bag = work_dir / "demo_bag"
     try:
         live_store = probe.record(ReconstructedObjectArray, "arm/meshes", latched_qos(depth=10))
-        live = [NodeProcess("sim", tmp_path / "live" / "sim.log", params=SIM)]
-        live += pipeline(tmp_path / "live", recon_params)
+        live = [NodeProcess("sim", work_dir / "live" / "sim.log", params=SIM)]
+        live += pipeline(work_dir / "live", recon_params)
         recorder = NodeProcess(
             "record",
-            tmp_path / "live" / "record.log",
+            work_dir / "live" / "record.log",
             args=(str(bag),),
             params={"use_sim_time": True, "topics": CAMERA + ["joint_states"]},
         )
         try:
-            assert probe.wait_until(lambda: len(meshes_by_stamp(live_store)) >= 2, 240.0, poll_s=0.2), "no live meshes"
+            live_ok = probe.wait_until(lambda: len(meshes_by_stamp(live_store)) >= 2, 240.0, poll_s=0.2)
         finally:
-            assert recorder.stop() == 0, recorder.log()[-2000:]
+            recorder_code = recorder.stop()
             for process in live:
                 process.stop()
+        assert live_ok, "no live meshes"
+        assert recorder_code == 0, recorder.log()[-2000:]
         live_meshes = meshes_by_stamp(live_store)
 
         with BagReader(bag) as reader:
@@ -72,10 +86,10 @@ def test_replayed_bag_reproduces_the_live_meshes(tmp_path, recon_params):
         probe_replay = Probe("replay_probe")
         try:
             replay_store = probe_replay.record(ReconstructedObjectArray, "arm/meshes", latched_qos(depth=10))
-            nodes = pipeline(tmp_path / "replay", recon_params)
+            nodes = pipeline(work_dir / "replay", recon_params)
             replay = NodeProcess(
                 "replay",
-                tmp_path / "replay" / "replay.log",
+                work_dir / "replay" / "replay.log",
                 args=(str(bag),),
                 params={
                     "mode": "consumed",

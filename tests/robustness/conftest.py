@@ -1,11 +1,15 @@
-"""Shared fixtures of the robustness suite: rendered input frames, a DDS probe, node processes.
+"""Shared fixtures of the robustness suite: rendered input frames and a log directory.
 
 Node processes are started with robustness_nodes.start (see there for the reconstruction checkpoint).
 """
 
+import pathlib
+import shutil
+import tempfile
+
 import pytest
 
-from arm_sim.robustness import Probe, render_frames
+from arm_sim.robustness import render_frames
 
 
 @pytest.fixture(scope="session")
@@ -19,12 +23,9 @@ def frames():
 
 
 @pytest.fixture(scope="session")
-def robustness_logs(tmp_path_factory):
-    return tmp_path_factory.mktemp("robustness_logs")
-
-
-@pytest.fixture
-def probe():
-    p = Probe()
-    yield p
-    p.close()
+def robustness_logs():
+    """Node logs and bags of the session, outside pytest's shared basetemp (other pytest sessions on
+    the machine prune that while long node runs still write to it)."""
+    path = pathlib.Path(tempfile.mkdtemp(prefix="arm_robustness_"))
+    yield path
+    shutil.rmtree(path, ignore_errors=True)

@@ -13,12 +13,12 @@ FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": False}
 
 
 @pytest.fixture(scope="module")
-def run(robustness_logs, tmp_path_factory):
+def run(robustness_logs):
     params = reconstruction_params()
     for key in ("segmentation", "reconstruction", "planner", "replay"):
         if not node_built(key):
             pytest.skip(f"{key} is not built")
-    bag = tmp_path_factory.mktemp("load") / "camera_30hz"
+    bag = robustness_logs / "camera_30hz"
     write_camera_bag(bag, render_frames(5, seed=3, count=3), CAMERA_HZ)
     log_dir = robustness_logs / "graph"
     graph = start_graph(log_dir, bag, params, planner_params=FAST_PLANNER)

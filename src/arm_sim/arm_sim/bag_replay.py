@@ -8,8 +8,10 @@ mode original: message i is published at start + (t_i - t_0) / rate (t = the bag
 mode consumed: camera frames (messages of frame_topics sharing a header stamp) are published one
 after the other; the next frame waits until consumed_topic has published a message stamped at or
 after the previous frame (or consumed_timeout_s passed). Every frame is then processed once.
-With loop:=true the bag repeats; header stamps (and /clock) are shifted by one bag period per pass
-so they keep increasing. Messages that do not decode are skipped with a rate-limited error; an
+start_offset_s / duration_s replay a window of the bag (bag time). In mode consumed the replay
+first waits for a subscriber on every replayed topic and a publisher on consumed_topic (the end of
+the chain is up). With loop:=true the bag repeats; header stamps (and /clock) are shifted by one
+bag period per pass so they keep increasing. Messages that do not decode are skipped with a rate-limited error; an
 unreadable bag is a configuration error (exit code 2).
 """
 

@@ -382,7 +382,7 @@ def _wait_log_quiet(process, quiet_s: float = 0.5, timeout_s: float = 5.0) -> No
 
 
 def run_reconstruction_bad_inputs(
-    probe, process, frames: dict, crowded: bool = True, valid_timeout_s: float = 300.0, reject_wait_s: float = 1.0
+    probe, process, frames: dict, crowded: bool = True, valid_timeout_s: float = 180.0, reject_wait_s: float = 1.0
 ) -> dict:
     """Send each reconstruction case; valid ones are waited for (one at a time: latest-frame
     processing would drop a frame sent while another is being reconstructed)."""
@@ -410,7 +410,9 @@ def run_reconstruction_bad_inputs(
         publisher.publish(case.build(stamp_s)["arm/segmented_frame"])
         if case.expect == "valid":  # a valid case may be rejected (logged, unless the rate limiter holds it)
             probe.wait_until(
-                lambda s=stamp_s, n=rejections_before: published(s) or _frame_rejections(process.log()) > n,
+                lambda s=stamp_s, n=rejections_before: (
+                    published(s) or _frame_rejections(process.log()) > n or not process.alive()
+                ),
                 valid_timeout_s,
                 poll_s=0.2,
             )
@@ -576,13 +578,13 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
         g = Manipulate.Goal(task=task, target_id=target_id, tolerance_m=tolerance_m)
         g.goal_displacement.x, g.goal_displacement.y, g.goal_displacement.z = displacement
         handle_future = probe.in_executor(lambda: action.send_goal_async(g))
-        if not probe.wait_until(handle_future.done, 30.0):
+        if not probe.wait_until(lambda: handle_future.done() or not process.alive(), 30.0) or not process.alive():
             return {"answered": False, "message": "no goal response"}
         handle = handle_future.result()
         if not handle.accepted:
             return {"answered": True, "accepted": False, "planned": False, "message": "rejected"}
         result_future = probe.in_executor(handle.get_result_async)
-        if not probe.wait_until(result_future.done, goal_timeout_s):
+        if not probe.wait_until(lambda: result_future.done() or not process.alive(), goal_timeout_s):
             return {"answered": False, "message": "no result"}
         result = result_future.result()
         planned = result.status == 4  # STATUS_SUCCEEDED: a plan came back (success or not)
