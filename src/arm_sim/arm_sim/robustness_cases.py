@@ -432,7 +432,11 @@ def run_reconstruction_bad_inputs(
                 "reason": case.reason if case.expect == "reject" else "",
             }
         )
-    probe.wait_until(lambda: probe.diagnostic_number(node, "frames_received", 0) >= len(cases), 5.0)
+    def accounted():  # diagnostics follow the meshes of the same frame: wait for the last of them
+        keys = ("frames_processed", "frames_rejected", "frames_dropped")
+        return sum(probe.diagnostic_number(node, k, 0) for k in keys) >= len(cases)
+
+    probe.wait_until(accounted, 10.0)
     counters = {
         k: probe.diagnostic_number(node, k, -1)
         for k in ("frames_received", "frames_processed", "frames_rejected", "frames_dropped")
