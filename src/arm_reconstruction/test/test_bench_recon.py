@@ -102,6 +102,7 @@ def small_config(out, checkpoints, **changes):
     return BenchConfig(**(fields | changes))
 
 
+@pytest.mark.slow
 def test_end_to_end_run_reports_measured_methods_and_skips_missing_ones(tmp_path, baseline_only_checkpoints):
     config = small_config(tmp_path, baseline_only_checkpoints)
     summary = run(config, progress=False)
@@ -130,6 +131,7 @@ def test_end_to_end_run_reports_measured_methods_and_skips_missing_ones(tmp_path
     assert again["methods"] == summary["methods"]
 
 
+@pytest.mark.slow
 def test_predicted_segmentation_is_matched_to_the_true_objects(tmp_path, baseline_only_checkpoints):
     config = small_config(tmp_path, baseline_only_checkpoints, segmentation="predicted",
                           methods=("visible-only", "ground-truth"), qualitative=0)
