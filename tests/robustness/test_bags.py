@@ -189,3 +189,32 @@ def test_record_refuses_an_existing_output_with_exit_code_2(tmp_path):
     if code is None:
         process.stop()
     assert code == 2 and "exists already" in process.log() and not tracebacks(process.log())
+
+
+@pytest.mark.skipif(not node_built("replay"), reason="arm_sim is not built (colcon build)")
+def test_replay_keeps_the_bag_timing_publishes_clock_and_loops_with_increasing_stamps(tmp_path):
+    from rosgraph_msgs.msg import Clock
+
+    period_ns = 100_000_000  # a 10 Hz camera
+    write_bag(
+        tmp_path / "bag", [("/camera/color/image_raw", (k + 1) * period_ns, image((k + 1) * 0.1)) for k in range(5)]
+    )
+    probe = Probe()
+    try:
+        received = probe.record(Image, "/camera/color/image_raw", 20)
+        clock = probe.record(Clock, "/clock", 100)
+        code, log = replay(
+            tmp_path, str(tmp_path / "bag"), loop=True, max_loops=2, wait_subscribers_s=10.0, linger_s=0.5
+        )
+        probe.wait_until(lambda: len(received) == 10, 5.0)
+        with probe.lock:
+            stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in received]
+            arrivals = list(received.times)
+            clock_s = [c.clock.sec + 1e-9 * c.clock.nanosec for c in clock]
+    finally:
+        probe.close()
+    assert code == 0 and not tracebacks(log), log[-800:]
+    assert len(stamps) == 10 and np.all(np.diff(stamps) > 0), stamps  # the second pass is shifted by 0.5 s
+    assert np.allclose(stamps, 0.1 * np.arange(1, 11), atol=1e-6)
+    assert abs(np.median(np.diff(arrivals)) - 0.1) < 0.03, np.diff(arrivals)
+    assert clock_s and np.all(np.diff(clock_s) >= 0) and 0.1 <= clock_s[0] and clock_s[-1] <= 1.0 + 1e-6
