@@ -57,8 +57,10 @@ def test_latest_frame_processing_keeps_the_lag_bounded(run):
 
 
 def test_memory_growth_below_50_mb(run):
-    growth = {k: v["max_growth_mb"] for k, v in run["load"]["memory"].items()}
-    assert all(g is not None and g < 50.0 for g in growth.values()), growth
+    """Steady-state growth (median of the last third of the samples minus the first third); single
+    samples swing with the frame being processed."""
+    growth = {k: v["trend_growth_mb"] for k, v in run["load"]["memory"].items()}
+    assert all(g is not None and g < 50.0 for g in growth.values()), run["load"]["memory"]
 
 
 def test_kill9_of_reconstruction_planner_keeps_meshes_and_pipeline_resumes(run):

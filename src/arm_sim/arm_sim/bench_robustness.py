@@ -245,6 +245,14 @@ def phase_load_fault(args, work: pathlib.Path) -> dict:
     }
 
 
+def _keep_logs(work: pathlib.Path, target: pathlib.Path, lines: int = 300) -> None:
+    """The last `lines` lines of every node log of a phase (the work directory is removed)."""
+    for log in sorted(work.rglob("*.log")):
+        destination = target / log.relative_to(work)
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        destination.write_text("\n".join(log.read_text(errors="replace").splitlines()[-lines:]) + "\n")
+
+
 def _plot(summary: dict, out: pathlib.Path) -> list[str]:
     import matplotlib
 
@@ -318,6 +326,7 @@ def _figures(phases: dict) -> dict:
             "camera_hz_achieved": load["rates_hz"]["camera"],
             "segmented_frames_hz": load["rates_hz"]["segmentation"],
             "meshes_hz": load["rates_hz"]["reconstruction"],
+            "memory_growth_trend_mb": {k: v.get("trend_growth_mb") for k, v in load["memory"].items()},
             "max_memory_growth_mb": {k: v["max_growth_mb"] for k, v in load["memory"].items()},
             "memory_growth_during_warmup_mb": {
                 k: (round(v["start_mb"] - v["at_first_meshes_mb"], 1) if v["start_mb"] is not None else None)
@@ -400,6 +409,7 @@ def main(argv=None) -> int:
         result = globals()[f"phase_{name}"](args, work)
         result["wall_s"] = round(time.monotonic() - started, 1)
         result["run"] = {"finished": time.strftime("%Y-%m-%d %H:%M:%S"), "args": vars(args)}
+        _keep_logs(work, out / "logs" / name)
         saved.write_text(json.dumps(result, indent=1, default=str))
         phases[name] = result
     for name in PHASES:  # phases of earlier runs that this one did not repeat

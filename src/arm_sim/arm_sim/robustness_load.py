@@ -127,12 +127,17 @@ def run_load(
     memory = {}
     for key in graph:
         series = [s[f"rss_mb_{key}"] for s in samples if np.isfinite(s[f"rss_mb_{key}"])]
+        third = max(1, len(series) // 3)
         memory[key] = {
             "at_first_meshes_mb": first_meshes_rss[key],
             "start_mb": series[0] if series else None,
             "end_mb": series[-1] if series else None,
             "growth_mb": round(series[-1] - series[0], 1) if series else None,
             "max_growth_mb": round(max(series) - series[0], 1) if series else None,
+            # median of the last third minus the first third: growth without single-frame spikes
+            "trend_growth_mb": round(float(np.median(series[-third:]) - np.median(series[:third])), 1)
+            if series
+            else None,
         }
     lag = {}
     for stage, values in watch.lags.items():
@@ -185,7 +190,6 @@ def run_fault(
     from arm_interfaces.action import Manipulate
 
     last = watch.last_meshes()
-    before_stamp = stamp_of(last) if last is not None else float("-inf")
     planner_objects_before = probe.diagnostic_number("plan_node", "twin_objects", 0)
     frames_before = watch.totals()["segmentation"]
     graph["reconstruction"].kill9()
@@ -211,6 +215,8 @@ def run_fault(
                     result = result_future.result()
                     goal_result.update(planned=result.status == 4, message=result.result.message)
         action.destroy()
+    newest = watch.last_meshes()  # anything the killed node had in flight has arrived by now
+    before_stamp = stamp_of(newest) if newest is not None else float("-inf")
     graph["reconstruction"] = restart()
     restarted_at = time.monotonic()
     resumed = probe.wait_until(
