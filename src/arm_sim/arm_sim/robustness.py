@@ -241,12 +241,9 @@ class Probe:
         self._thread.start()
 
     def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
+        from arm_sim.ros_common import spin_until_shutdown
 
-        try:
-            self.executor.spin()
-        except (ExternalShutdownException, KeyboardInterrupt):
-            pass
+        spin_until_shutdown(self.executor)
 
     def publisher(self, msg_type, topic: str, qos=10):
         return self.node.create_publisher(msg_type, topic, qos)
@@ -331,10 +328,10 @@ class Probe:
         return self.wait_until(lambda: all(p.get_subscription_count() > 0 for p in publishers), timeout_s)
 
     def close(self) -> None:
+        self._rclpy.try_shutdown(context=self.context)  # the spin thread returns quietly
+        self._thread.join(timeout=2.0)
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=2.0)
 
 
 class _Recorded(deque):

@@ -214,7 +214,6 @@ def run_fault(
                 if result_future.done():
                     result = result_future.result()
                     goal_result.update(planned=result.status == 4, message=result.result.message)
-        action.destroy()
     newest = watch.last_meshes()  # anything the killed node had in flight has arrived by now
     before_stamp = stamp_of(newest) if newest is not None else float("-inf")
     graph["reconstruction"] = restart()
