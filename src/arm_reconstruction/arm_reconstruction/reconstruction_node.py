@@ -127,7 +127,7 @@ class ReconstructionNode(Node):
             objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
         except (ConversionError, GridInputError) as error:
             self.rejected += 1
-            self.errors.error(type(error).__name__, f"dropping malformed segmented frame: {error}")
+            self.errors.error(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
             return
         except Exception as error:  # a failure inside one frame must not kill the node
             self.rejected += 1

@@ -97,7 +97,8 @@ class SegmentationNode(Node):
         except FrameError as error:
             self.frames_rejected += 1
             self.last_error = str(error)
-            self.errors.error(type(error).__name__, f"frame at t={stamp_s(depth):.3f} s rejected: {error}")
+            cause = f"{type(error).__name__}: {error}"
+            self.errors.error(cause, f"frame at t={stamp_s(depth):.3f} s rejected: {error}")
             return
         self.pub_frame.publish(frame)
         self.pub_overlay.publish(overlay)

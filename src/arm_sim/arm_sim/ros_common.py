@@ -1,6 +1,7 @@
 """Node plumbing shared by every ARM node: QoS profiles, declared parameters, rate-limited error
 logs, diagnostics and a clean main loop. Imports rclpy: node modules only, never the cores."""
 
+import re
 import time
 
 import rclpy
@@ -66,19 +67,28 @@ def _register_choices(node, name: str, choices: list) -> None:
 
 
 class RateLimitedErrors:
-    """Log each distinct error cause at most once per period_s, counting the suppressed repeats."""
+    """Log each distinct error cause at most once per period_s, counting the suppressed repeats.
 
-    def __init__(self, logger, period_s: float = 5.0):
-        self.logger, self.period_s = logger, period_s
+    Numbers in a cause are ignored when telling causes apart (so "depth 480x640 != rgb 240x320" is one
+    cause whatever the sizes), and at most max_causes causes are tracked: memory stays bounded."""
+
+    def __init__(self, logger, period_s: float = 5.0, max_causes: int = 256):
+        self.logger, self.period_s, self.max_causes = logger, period_s, max_causes
         self._last: dict[str, float] = {}
         self.counts: dict[str, int] = {}
 
     def error(self, cause: str, message: str) -> None:
-        self.counts[cause] = self.counts.get(cause, 0) + 1
+        key = _NUMBER.sub("#", cause)
+        if key not in self.counts and len(self.counts) >= self.max_causes:
+            key = "other"
+        self.counts[key] = self.counts.get(key, 0) + 1
         now = time.monotonic()
-        if now - self._last.get(cause, -1e9) >= self.period_s:
-            self._last[cause] = now
-            self.logger.error(f"{message} [{cause}, seen {self.counts[cause]}x]")
+        if now - self._last.get(key, -1e9) >= self.period_s:
+            self._last[key] = now
+            self.logger.error(f"{message} [seen {self.counts[key]}x]")
+
+
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", re.IGNORECASE)
 
 
 def diagnostics_msg(node, name: str, values: dict, level=DiagnosticStatus.OK, message: str = "ok") -> DiagnosticArray:
