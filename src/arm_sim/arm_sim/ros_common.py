@@ -85,7 +85,7 @@ class RateLimitedErrors:
         now = time.monotonic()
         if now - self._last.get(key, -1e9) >= self.period_s:
             self._last[key] = now
-            self.logger.error(f"{message} [seen {self.counts[key]}x]")
+            self.logger.error(f"{message} [{cause}, seen {self.counts[key]}x]")
 
 
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", re.IGNORECASE)
