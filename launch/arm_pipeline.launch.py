@@ -19,12 +19,22 @@ CONFIG = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config"
 def generate_launch_description():
     use_sim = LaunchConfiguration("use_sim")
     nodes = [
-        Node(package="arm_sim", executable="sim_node", parameters=[os.path.join(CONFIG, "sim_node.yaml")],
-             condition=IfCondition(use_sim)),
-        Node(package="arm_segmentation", executable="segmentation_node",
-             parameters=[os.path.join(CONFIG, "segmentation_node.yaml")]),
-        Node(package="arm_reconstruction", executable="reconstruction_node",
-             parameters=[os.path.join(CONFIG, "reconstruction_node.yaml")]),
+        Node(
+            package="arm_sim",
+            executable="sim_node",
+            parameters=[os.path.join(CONFIG, "sim_node.yaml")],
+            condition=IfCondition(use_sim),
+        ),
+        Node(
+            package="arm_segmentation",
+            executable="segmentation_node",
+            parameters=[os.path.join(CONFIG, "segmentation_node.yaml")],
+        ),
+        Node(
+            package="arm_reconstruction",
+            executable="reconstruction_node",
+            parameters=[os.path.join(CONFIG, "reconstruction_node.yaml")],
+        ),
         Node(package="arm_planner", executable="plan_node", parameters=[os.path.join(CONFIG, "plan_node.yaml")]),
     ]
     return LaunchDescription([DeclareLaunchArgument("use_sim", default_value="true")] + nodes)

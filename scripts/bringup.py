@@ -48,8 +48,9 @@ class Graph:
             cmd += ["--params-file", str(ROOT / "config" / params)]
         cmd += list(extra_args)
         log = open(self.log_dir / f"{key}.log", "w")  # noqa: SIM115 - lives as long as the process
-        process = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy(),
-                                   start_new_session=True)
+        process = subprocess.Popen(
+            cmd, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True
+        )
         self.processes[key] = process
         return process
 

@@ -52,11 +52,15 @@ class Observer:
         self.diagnostics: dict[str, dict] = {}
         qos = sensor_qos("reliable")
         for topic, kind, profile in [
-            ("camera/color/image_raw", Image, qos), ("camera/depth/image_raw", Image, qos),
-            ("camera/camera_info", CameraInfo, qos), ("camera/pose", PoseStamped, qos),
-            ("sim/ground_truth/labels", Image, qos), ("arm/segmented_frame", SegmentedFrame, 2),
+            ("camera/color/image_raw", Image, qos),
+            ("camera/depth/image_raw", Image, qos),
+            ("camera/camera_info", CameraInfo, qos),
+            ("camera/pose", PoseStamped, qos),
+            ("sim/ground_truth/labels", Image, qos),
+            ("arm/segmented_frame", SegmentedFrame, 2),
             ("arm/meshes", ReconstructedObjectArray, latched_qos()),
-            ("sim/ground_truth/objects", ReconstructedObjectArray, latched_qos()), ("joint_states", JointState, 10),
+            ("sim/ground_truth/objects", ReconstructedObjectArray, latched_qos()),
+            ("joint_states", JointState, 10),
             ("sim/ground_truth/poses", PoseArray, 10),
         ]:
             node.create_subscription(kind, topic, lambda m, t=topic: self._store(t, m), profile)
@@ -146,12 +150,20 @@ def main() -> int:
             if key == "reconstruction" and args.method:
                 extra = ["-p", f"method:={args.method}"]
             graph.start(key, *extra)
-        summary["stages"] = {k: ("running" if k in stages or k == "sim" else "not built")
-                             for k in ("sim", "segmentation", "reconstruction", "planner")}
+        summary["stages"] = {
+            k: ("running" if k in stages or k == "sim" else "not built")
+            for k in ("sim", "segmentation", "reconstruction", "planner")
+        }
         print(f"[demo] node graph: {summary['stages']}", flush=True)
 
-        sim_topics = ["camera/color/image_raw", "camera/depth/image_raw", "camera/camera_info", "camera/pose",
-                      "sim/ground_truth/objects", "sim/ground_truth/labels"]
+        sim_topics = [
+            "camera/color/image_raw",
+            "camera/depth/image_raw",
+            "camera/camera_info",
+            "camera/pose",
+            "sim/ground_truth/objects",
+            "sim/ground_truth/labels",
+        ]
         if not observer.wait(sim_topics, 90.0):
             print(f"[demo] the sim published nothing in time: {observer.counts}", file=sys.stderr)
             return 1
@@ -190,8 +202,11 @@ def main() -> int:
                 centre = rmesh.centroid
                 gid, gmesh = min(gt, key=lambda g: np.linalg.norm(g[1].centroid - centre))
                 errors.append({"id": rid, "matched_truth_id": gid, "chamfer_m": round(chamfer_m(rmesh, gmesh), 4)})
-            summary["reconstruction"] = {"objects": len(recon), "per_object": errors,
-                                         "mean_chamfer_m": float(np.mean([e["chamfer_m"] for e in errors] or [np.nan]))}
+            summary["reconstruction"] = {
+                "objects": len(recon),
+                "per_object": errors,
+                "mean_chamfer_m": float(np.mean([e["chamfer_m"] for e in errors] or [np.nan])),
+            }
             side_view = look_at((0.0, -0.9, 0.45), (0.0, 0.0, 0.05))
             fig, axes = plt.subplots(2, 2, figsize=(12, 9))
             for row, (name, camera) in enumerate([("camera view", T_world_camera), ("side view", side_view)]):
@@ -281,11 +296,19 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
         wanted = np.array([goal.goal_displacement.x, goal.goal_displacement.y])
         error = float(np.linalg.norm(moved[:2] - wanted))
         success = error <= 0.025
-    return {"task": task, "target_id": int(target.id), "truth_id": int(gt_id), "planned_success": bool(result.success),
-            "message": result.message, "predicted_error_m": round(float(result.final_error_m), 4),
-            "planning_s": round(plan_s, 1), "trajectory_s": round(duration, 2),
-            "target_displacement_m": np.round(moved, 4).tolist(), "success_in_sim": success,
-            "error_in_sim_m": round(error, 4)}
+    return {
+        "task": task,
+        "target_id": int(target.id),
+        "truth_id": int(gt_id),
+        "planned_success": bool(result.success),
+        "message": result.message,
+        "predicted_error_m": round(float(result.final_error_m), 4),
+        "planning_s": round(plan_s, 1),
+        "trajectory_s": round(duration, 2),
+        "target_displacement_m": np.round(moved, 4).tolist(),
+        "success_in_sim": success,
+        "error_in_sim_m": round(error, 4),
+    }
 
 
 if __name__ == "__main__":

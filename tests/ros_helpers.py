@@ -20,8 +20,9 @@ def start_node(package: str, name: str, *ros_args: str, params_file: str | None 
     if params_file:
         cmd += ["--params-file", str(ROOT / "config" / params_file)]
     cmd += list(ros_args)
-    return subprocess.Popen(cmd, stdout=log or subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(),
-                            start_new_session=True)
+    return subprocess.Popen(
+        cmd, stdout=log or subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True
+    )
 
 
 def stop_node(process, timeout_s: float = 10.0) -> int:

@@ -15,17 +15,23 @@ from ros_helpers import spin_until, start_node, stop_node
 
 
 def test_sim_node_publishes_frames_truth_and_executes_trajectories(ros_node):
-    sim = start_node("arm_sim", "sim_node", "-p", "n_objects:=4", "-p", "camera_rate_hz:=4.0",
-                     params_file="sim_node.yaml")
+    sim = start_node(
+        "arm_sim", "sim_node", "-p", "n_objects:=4", "-p", "camera_rate_hz:=4.0", params_file="sim_node.yaml"
+    )
     got = {}
     qos = sensor_qos("best_effort")
-    for topic, kind in [("camera/color/image_raw", Image), ("camera/depth/image_raw", Image),
-                        ("camera/camera_info", CameraInfo), ("camera/pose", PoseStamped),
-                        ("sim/ground_truth/labels", Image)]:
+    for topic, kind in [
+        ("camera/color/image_raw", Image),
+        ("camera/depth/image_raw", Image),
+        ("camera/camera_info", CameraInfo),
+        ("camera/pose", PoseStamped),
+        ("sim/ground_truth/labels", Image),
+    ]:
         ros_node.create_subscription(kind, topic, lambda m, t=topic: got.__setitem__(t, m), qos)
     ros_node.create_subscription(JointState, "joint_states", lambda m: got.__setitem__("joints", m), 10)
-    ros_node.create_subscription(ReconstructedObjectArray, "sim/ground_truth/objects",
-                                 lambda m: got.__setitem__("truth", m), latched_qos())
+    ros_node.create_subscription(
+        ReconstructedObjectArray, "sim/ground_truth/objects", lambda m: got.__setitem__("truth", m), latched_qos()
+    )
     try:
         assert spin_until(ros_node, lambda: len(got) == 7, 60.0), f"missing topics, got {sorted(got)}"
         rgb = image_to_numpy(got["camera/color/image_raw"])

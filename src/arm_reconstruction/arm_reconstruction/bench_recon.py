@@ -225,8 +225,9 @@ def match_instances(predicted, truth, truth_ids, min_iou: float = MIN_MATCH_IOU)
     return match
 
 
-def scene_stability(objects, table_height_m: float, table_half_extent_m, duration_s: float = 5.0,
-                    timestep_s: float = 0.01) -> dict[int, float]:
+def scene_stability(
+    objects, table_height_m: float, table_half_extent_m, duration_s: float = 5.0, timestep_s: float = 0.01
+) -> dict[int, float]:
     """id -> L2 displacement (m) of each object's centre of mass after duration_s of gravity alone.
 
     objects: arm_planner.twin.TwinObject (object-frame mesh and convex parts, T_world_object). The
@@ -310,7 +311,9 @@ def _qualitative_payload(scene, frame, object_id: int, meshes: dict) -> dict:
     visible = frame.labels == object_id
     r0, r1, c0, c1 = _crop_box(full | visible)
     payload = {
-        "rgb": frame.rgb[r0:r1, c0:c1], "visible": visible[r0:r1, c0:c1], "silhouette": full[r0:r1, c0:c1],
+        "rgb": frame.rgb[r0:r1, c0:c1],
+        "visible": visible[r0:r1, c0:c1],
+        "silhouette": full[r0:r1, c0:c1],
         "camera_eye": frame.T_world_camera[:3, 3],
     }
     for name, mesh in meshes.items():
@@ -346,12 +349,25 @@ def _score_method(reconstructor, grids, labels, frame, truths: dict, match: dict
 
 def _score_ground_truth(scene, truth_ids, decomposition: DecompositionSettings, table, config) -> dict:
     """Displacements of the true meshes through the pipeline's decomposition, and with the simulator's parts."""
-    run_physics = functools.partial(scene_stability, table_height_m=table[0], table_half_extent_m=table[1],
-                                    duration_s=config.settle_s, timestep_s=config.physics_timestep_s)
+    run_physics = functools.partial(
+        scene_stability,
+        table_height_m=table[0],
+        table_half_extent_m=table[1],
+        duration_s=config.settle_s,
+        timestep_s=config.physics_timestep_s,
+    )
     moved = run_physics(ground_truth_objects(scene, truth_ids, ConvexDecomposer(decomposition)))
     moved_sim_parts = run_physics(simulator_part_objects(scene, truth_ids))
-    return {i: {"empty": False, "chamfer_m": None, "iou": None, "displacement_m": moved.get(i),
-                "displacement_sim_parts_m": moved_sim_parts.get(i)} for i in truth_ids}
+    return {
+        i: {
+            "empty": False,
+            "chamfer_m": None,
+            "iou": None,
+            "displacement_m": moved.get(i),
+            "displacement_sim_parts_m": moved_sim_parts.get(i),
+        }
+        for i in truth_ids
+    }
 
 
 def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) -> tuple[dict, dict]:
@@ -370,10 +386,14 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
     truths = {i: scene.objects[i - 1].world_mesh() for i in truth_ids}
     rows = {
         i: {
-            "scene": index, "object": i - 1, "category": scene.objects[i - 1].model.category,
-            "scale": float(scene.objects[i - 1].scale), "visible_fraction": float(frame.visible_fraction[i - 1]),
+            "scene": index,
+            "object": i - 1,
+            "category": scene.objects[i - 1].model.category,
+            "scale": float(scene.objects[i - 1].scale),
+            "visible_fraction": float(frame.visible_fraction[i - 1]),
             "visible_pixels": int(np.count_nonzero((frame.labels == i) & (frame.depth_m > 0))),
-            "matched": i in match, "methods": {},
+            "matched": i in match,
+            "methods": {},
         }
         for i in truth_ids
     }
@@ -384,8 +404,9 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
         reconstructor.timer.reset()
         key = (reconstructor.resolution, reconstructor.settings.k, reconstructor.settings.table_height_m)
         if key not in grids_cache:
-            grids_cache[key] = reconstructor.grids(frame.depth_m, frame.K, frame.T_world_camera, labels,
-                                                   reconstruct_ids)
+            grids_cache[key] = reconstructor.grids(
+                frame.depth_m, frame.K, frame.T_world_camera, labels, reconstruct_ids
+            )
         entries, meshes = _score_method(reconstructor, grids_cache[key], labels, frame, truths, match, table, config)
         for i in truth_ids:
             rows[i]["methods"][name] = entries[i]
@@ -399,17 +420,25 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
             rows[i]["methods"][GROUND_TRUTH] = entry
         timing[GROUND_TRUTH] = {"total_s": time.perf_counter() - tick}
     qualitative = {}
-    hard = sorted((rows[i]["visible_fraction"], i) for i in truth_ids
-                  if rows[i]["visible_fraction"] < QUALITATIVE_MAX_VISIBILITY and {"baseline", "arm"} <= set(kept[i]))
+    hard = sorted(
+        (rows[i]["visible_fraction"], i)
+        for i in truth_ids
+        if rows[i]["visible_fraction"] < QUALITATIVE_MAX_VISIBILITY and {"baseline", "arm"} <= set(kept[i])
+    )
     for n, (_, i) in enumerate(hard[:QUALITATIVE_PER_SCENE]):
         meshes = {m: kept[i][m] for m in ("baseline", "arm", GROUND_TRUTH)}
         for key, value in _qualitative_payload(scene, frame, i, meshes).items():
             qualitative[f"{n}/{key}"] = value
         qualitative[f"{n}/object"] = np.int64(i - 1)
     result = {
-        "scene": index, "objects_in_scene": len(scene.objects), "objects_evaluated": len(rows),
-        "segments_reconstructed": len(reconstruct_ids), "rows": list(rows.values()), "timing_s": timing,
-        "wall_s": time.perf_counter() - start, "cpu_s": time.process_time() - start_cpu,
+        "scene": index,
+        "objects_in_scene": len(scene.objects),
+        "objects_evaluated": len(rows),
+        "segments_reconstructed": len(reconstruct_ids),
+        "rows": list(rows.values()),
+        "timing_s": timing,
+        "wall_s": time.perf_counter() - start,
+        "cpu_s": time.process_time() - start_cpu,
     }
     return result, qualitative
 
@@ -444,6 +473,7 @@ def _savez(path: str, arrays: dict) -> None:
 
 
 # --- aggregation --------------------------------------------------------------------------------
+
 
 def bin_label(bounds) -> str:
     return f"{bounds[0]:.1f}-{bounds[1]:.1f}"
@@ -489,22 +519,38 @@ def _stats(entries: list[dict], threshold_m: float, geometric: bool) -> dict:
     if geometric:
         chamfer = [e["chamfer_m"] for e in entries if e["chamfer_m"] is not None]
         iou = [e["iou"] for e in entries if e["iou"] is not None]
-        out |= {"chamfer_m": _mean(chamfer), "chamfer_m_median": float(np.median(chamfer)) if chamfer else None,
-                "chamfer_m_ci90": bootstrap_ci(chamfer), "n_chamfer": len(chamfer), "iou": _mean(iou),
-                "iou_ci90": bootstrap_ci(iou), "n_iou_undefined": len(entries) - len(iou)}
+        out |= {
+            "chamfer_m": _mean(chamfer),
+            "chamfer_m_median": float(np.median(chamfer)) if chamfer else None,
+            "chamfer_m_ci90": bootstrap_ci(chamfer),
+            "n_chamfer": len(chamfer),
+            "iou": _mean(iou),
+            "iou_ci90": bootstrap_ci(iou),
+            "n_iou_undefined": len(entries) - len(iou),
+        }
     else:
         out |= {"chamfer_m": None, "iou": None}
-    out |= {"stable_fraction": stable / len(entries) if entries else None, "stable_ci90": wilson(stable, len(entries)),
-            "displacement_m_mean": _mean(finite), "displacement_m_median": float(np.median(finite)) if finite else None}
+    out |= {
+        "stable_fraction": stable / len(entries) if entries else None,
+        "stable_ci90": wilson(stable, len(entries)),
+        "displacement_m_mean": _mean(finite),
+        "displacement_m_median": float(np.median(finite)) if finite else None,
+    }
     return out
 
 
 def paired_chamfer(rows: list[dict], a: str, b: str, bins=True) -> dict:
     """Chamfer of a and b on the objects both reconstructed: means, relative reduction 1 - a / b."""
+
     def compare(subset):
-        pairs = [(r["methods"][a]["chamfer_m"], r["methods"][b]["chamfer_m"]) for r in subset
-                 if a in r["methods"] and b in r["methods"]
-                 and r["methods"][a]["chamfer_m"] is not None and r["methods"][b]["chamfer_m"] is not None]
+        pairs = [
+            (r["methods"][a]["chamfer_m"], r["methods"][b]["chamfer_m"])
+            for r in subset
+            if a in r["methods"]
+            and b in r["methods"]
+            and r["methods"][a]["chamfer_m"] is not None
+            and r["methods"][b]["chamfer_m"] is not None
+        ]
         if not pairs:
             return {"n": 0, a: None, b: None, "reduction": None}
         mean_a, mean_b = (float(np.mean(v)) for v in zip(*pairs, strict=True))
@@ -512,8 +558,9 @@ def paired_chamfer(rows: list[dict], a: str, b: str, bins=True) -> dict:
 
     out = compare(rows)
     if bins:
-        out["by_visibility"] = {bin_label(b): compare([r for r in rows if r["bin"] == bin_label(b)])
-                                for b in VISIBILITY_BINS}
+        out["by_visibility"] = {
+            bin_label(b): compare([r for r in rows if r["bin"] == bin_label(b)]) for b in VISIBILITY_BINS
+        }
     return out
 
 
@@ -533,14 +580,19 @@ def summarise(results: list[dict], config: BenchConfig, skipped: dict, checkpoin
             in_bin = [r["methods"][name] for r in entries if r["bin"] == label]
             by_visibility[label] = _stats(in_bin, config.stable_threshold_m, geometric)
         timings = [s["timing_s"][name] for s in results if name in s["timing_s"]]
-        methods[name] = {"status": "ok", **stats, "by_visibility": by_visibility,
-                         "seconds_per_scene": _mean([t["total_s"] for t in timings])}
+        methods[name] = {
+            "status": "ok",
+            **stats,
+            "by_visibility": by_visibility,
+            "seconds_per_scene": _mean([t["total_s"] for t in timings]),
+        }
         if name in checkpoints:
             methods[name]["checkpoint"] = checkpoints[name]
     ok = {name for name, m in methods.items() if m["status"] == "ok"}
     if GROUND_TRUTH in ok:
-        sim_parts = [{"empty": False, "displacement_m": r["methods"][GROUND_TRUTH].get("displacement_sim_parts_m")}
-                     for r in rows]
+        sim_parts = [
+            {"empty": False, "displacement_m": r["methods"][GROUND_TRUTH].get("displacement_sim_parts_m")} for r in rows
+        ]
         methods[GROUND_TRUTH]["simulator_parts"] = _stats(sim_parts, config.stable_threshold_m, False)
     paired = paired_chamfer(rows, "arm", "baseline") if {"arm", "baseline"} <= ok else None
     summary = {
@@ -564,23 +616,33 @@ def targets(summary: dict) -> dict:
     methods, paired = summary["methods"], summary["arm_vs_baseline_paired_chamfer"]
     out = {}
     if paired and paired["reduction"] is not None:
-        out["arm_chamfer_reduction_vs_baseline"] = {"value": paired["reduction"], "target": TARGET_CHAMFER_REDUCTION,
-                                                    "met": paired["reduction"] >= TARGET_CHAMFER_REDUCTION}
+        out["arm_chamfer_reduction_vs_baseline"] = {
+            "value": paired["reduction"],
+            "target": TARGET_CHAMFER_REDUCTION,
+            "met": paired["reduction"] >= TARGET_CHAMFER_REDUCTION,
+        }
         low = {label: p for label, p in paired["by_visibility"].items() if float(label.split("-")[1]) <= 0.6}
         lower = {label: (p["arm"] < p["baseline"]) if p["n"] else None for label, p in low.items()}
         out["arm_lower_chamfer_every_bin_below_0.6"] = {"value": lower, "met": all(v is True for v in lower.values())}
     arm, truth = methods.get("arm", {}), methods.get(GROUND_TRUTH, {})
     if arm.get("status") == "ok" and arm["stable_fraction"] is not None:
-        out["arm_stable_fraction"] = {"value": arm["stable_fraction"], "target": TARGET_STABLE_FRACTION,
-                                      "met": arm["stable_fraction"] >= TARGET_STABLE_FRACTION}
+        out["arm_stable_fraction"] = {
+            "value": arm["stable_fraction"],
+            "target": TARGET_STABLE_FRACTION,
+            "met": arm["stable_fraction"] >= TARGET_STABLE_FRACTION,
+        }
         if truth.get("status") == "ok" and truth["stable_fraction"] is not None:
             gap = truth["stable_fraction"] - arm["stable_fraction"]
-            out["arm_stable_gap_to_ground_truth"] = {"value": gap, "target": TARGET_STABLE_GAP,
-                                                     "met": gap <= TARGET_STABLE_GAP}
+            out["arm_stable_gap_to_ground_truth"] = {
+                "value": gap,
+                "target": TARGET_STABLE_GAP,
+                "met": gap <= TARGET_STABLE_GAP,
+            }
     return out
 
 
 # --- figures and report -------------------------------------------------------------------------
+
 
 def _pyplot():
     import matplotlib
@@ -606,8 +668,9 @@ def plot_by_visibility(summary: dict, path: pathlib.Path) -> None:
             low = np.array([c[0] for c in ci], dtype=np.float64) * scale
             high = np.array([c[1] for c in ci], dtype=np.float64) * scale
             yerr = np.stack([np.nan_to_num(mean - low), np.nan_to_num(high - mean)])
-            ax.errorbar(x + offset, mean, yerr=yerr, marker="o", capsize=3, label=name,
-                        linewidth=2.5 if name == "arm" else 1.2)
+            ax.errorbar(
+                x + offset, mean, yerr=yerr, marker="o", capsize=3, label=name, linewidth=2.5 if name == "arm" else 1.2
+            )
     axes[0].set_ylabel("Chamfer distance (mm, lower is better)")
     axes[1].set_ylabel("volumetric IoU (higher is better)")
     for ax in axes:
@@ -628,10 +691,13 @@ def plot_stability(summary: dict, path: pathlib.Path) -> None:
     rates = np.array([summary["methods"][n]["stable_fraction"] or 0.0 for n in names])
     ci = np.array([summary["methods"][n]["stable_ci90"] for n in names], dtype=np.float64).reshape(-1, 2)
     colours = ["tab:green" if n == GROUND_TRUTH else "tab:red" if n == "arm" else "tab:blue" for n in names]
-    axes[0].bar(names, rates, yerr=np.nan_to_num(np.stack([rates - ci[:, 0], ci[:, 1] - rates])), capsize=4,
-                color=colours)
-    axes[0].set_ylabel(f"fraction moved < {summary['config']['stable_threshold_m'] * 100:.0f} cm "
-                       f"in {summary['config']['settle_s']:.0f} s")
+    axes[0].bar(
+        names, rates, yerr=np.nan_to_num(np.stack([rates - ci[:, 0], ci[:, 1] - rates])), capsize=4, color=colours
+    )
+    axes[0].set_ylabel(
+        f"fraction moved < {summary['config']['stable_threshold_m'] * 100:.0f} cm "
+        f"in {summary['config']['settle_s']:.0f} s"
+    )
     axes[0].set_ylim(0, 1.05)
     median = np.array([summary["methods"][n]["displacement_m_median"] or 0.0 for n in names]) * 100
     mean = np.array([summary["methods"][n]["displacement_m_mean"] or 0.0 for n in names]) * 100
@@ -717,8 +783,11 @@ def load_cases(cache_dir: pathlib.Path, results: list[dict], count: int) -> list
                     case[name] = (data[f"{n}/{name}/vertices"], data[f"{n}/{name}/faces"])
                     if name in row["methods"] and row["methods"][name]["chamfer_m"] is not None:
                         case[f"{name}_chamfer_m"] = row["methods"][name]["chamfer_m"]
-                case |= {"category": row["category"], "visible_fraction": row["visible_fraction"],
-                         "scene": result["scene"]}
+                case |= {
+                    "category": row["category"],
+                    "visible_fraction": row["visible_fraction"],
+                    "scene": result["scene"],
+                }
                 candidates.append(case)
                 n += 1
     candidates.sort(key=lambda c: c["visible_fraction"])
@@ -740,20 +809,29 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
     cfg, methods = summary["config"], summary["methods"]
     ok = [n for n, m in methods.items() if m["status"] == "ok"]
     pool = cfg["objects"] or "procedural held-out categories (" + ", ".join(_heldout()) + ")"
-    seg = "ground-truth instance labels" if cfg["segmentation"] == "ground-truth" else \
-        "instance labels predicted by arm_segmentation.segment (true objects matched at mask IoU > 0.5)"
-    view = "the first random view of the paper's camera distribution that shows an object" \
-        if cfg["view"] == "random" else (
+    seg = (
+        "ground-truth instance labels"
+        if cfg["segmentation"] == "ground-truth"
+        else "instance labels predicted by arm_segmentation.segment (true objects matched at mask IoU > 0.5)"
+    )
+    view = (
+        "the first random view of the paper's camera distribution that shows an object"
+        if cfg["view"] == "random"
+        else (
             f"of {cfg['view_candidates']} random views of the paper's camera distribution, the one with the most "
             f"evaluated objects less than {OCCLUDED_VISIBILITY:.0%} visible, to populate the low-visibility bins: "
             "the overall means weigh occluded objects more than random views would; the per-bin results do not "
-            "depend on it")
+            "depend on it"
+        )
+    )
     lines = [
-        "# Reconstruction benchmark: ARM against its baselines (paper Figure 4)", "",
+        "# Reconstruction benchmark: ARM against its baselines (paper Figure 4)",
+        "",
         f"{summary['scenes']} cluttered scenes (seed {cfg['seed']}, {cfg['min_objects']}-{cfg['max_objects']} objects, "
         f"pool: {pool}), one 640x480 view each ({view}; depth noise "
         f"{'on' if cfg['depth_noise'] else 'off'}), {seg}. {summary['objects']} objects evaluated (those showing >= "
-        f"{cfg['min_visible_pixels']} pixels with depth); {summary['objects_matched']} matched.", "",
+        f"{cfg['min_visible_pixels']} pixels with depth); {summary['objects_matched']} matched.",
+        "",
         "**Chamfer distance** (metres, reported in mm): N = "
         f"{cfg['chamfer_samples']} points sampled uniformly by area on the reconstructed surface (A) and on the "
         "true surface (B); CD = 0.5 * (mean over a in A of min over b in B of |a - b| + mean over b in B of min over "
@@ -764,8 +842,10 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         f"object's centre of mass moved < {cfg['stable_threshold_m'] * 100:g} cm. The true meshes go through the same "
         "decomposition and scene builder (ground-truth row). An object a method left empty counts as IoU 0 and not "
         "stable and is left out of that method's Chamfer mean (column 'empty'). Intervals: 90% (bootstrap for means, "
-        "Wilson for fractions).", "",
-        "## Overall", "",
+        "Wilson for fractions).",
+        "",
+        "## Overall",
+        "",
         "| method | objects | empty | Chamfer mm (90% CI) | median mm | IoU | stable fraction (90% CI) "
         "| displacement cm, median / mean | s/scene |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -774,27 +854,42 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         m = methods[name]
         low, high = (_fmt(v, 1000, 2) for v in m.get("chamfer_m_ci90", [None, None]))
         chamfer = "-" if m["chamfer_m"] is None else f"{m['chamfer_m'] * 1000:.2f} ({low}-{high})"
-        stable = "-" if m["stable_fraction"] is None else \
-            f"{m['stable_fraction']:.3f} ({_fmt(m['stable_ci90'][0])}-{_fmt(m['stable_ci90'][1])})"
+        stable = (
+            "-"
+            if m["stable_fraction"] is None
+            else f"{m['stable_fraction']:.3f} ({_fmt(m['stable_ci90'][0])}-{_fmt(m['stable_ci90'][1])})"
+        )
         moved = f"{_fmt(m['displacement_m_median'], 100, 2)} / {_fmt(m['displacement_m_mean'], 100, 2)}"
-        lines.append(f"| {name} | {m['n']} | {m['n_empty']} | {chamfer} | {_fmt(m.get('chamfer_m_median'), 1000, 2)} "
-                     f"| {_fmt(m['iou'])} | {stable} | {moved} | {_fmt(m['seconds_per_scene'], 1, 1)} |")
+        lines.append(
+            f"| {name} | {m['n']} | {m['n_empty']} | {chamfer} | {_fmt(m.get('chamfer_m_median'), 1000, 2)} "
+            f"| {_fmt(m['iou'])} | {stable} | {moved} | {_fmt(m['seconds_per_scene'], 1, 1)} |"
+        )
     sim_parts = methods.get(GROUND_TRUTH, {}).get("simulator_parts")
     if sim_parts and sim_parts["stable_fraction"] is not None:
         low, high = (_fmt(v) for v in sim_parts["stable_ci90"])
-        lines.append(f"\nFor scale: the true meshes with the simulator's own convex parts (not re-decomposed by the "
-                     f"pipeline) are stable in {sim_parts['stable_fraction']:.3f} ({low}-{high}) of cases; the gap to "
-                     "the ground-truth row is what the pipeline's convex decomposition costs.")
+        lines.append(
+            f"\nFor scale: the true meshes with the simulator's own convex parts (not re-decomposed by the "
+            f"pipeline) are stable in {sim_parts['stable_fraction']:.3f} ({low}-{high}) of cases; the gap to "
+            "the ground-truth row is what the pipeline's convex decomposition costs."
+        )
     for name, m in methods.items():
         if m["status"] == "skipped":
             lines.append(f"\n**{name}: skipped** ({m['reason']})")
     labels = [bin_label(b) for b in VISIBILITY_BINS]
     counts = " | ".join(str(summary["objects_by_visibility"][b]) for b in labels)
-    for title, key, scale, digits in (("Chamfer distance (mm) by visible fraction", "chamfer_m", 1000, 2),
-                                      ("Volumetric IoU by visible fraction", "iou", 1, 3),
-                                      ("Stable fraction by visible fraction", "stable_fraction", 1, 3)):
-        lines += ["", f"## {title}", "", "| method | " + " | ".join(labels) + " |",
-                  "|---|" + "---|" * len(labels), f"| objects | {counts} |"]
+    for title, key, scale, digits in (
+        ("Chamfer distance (mm) by visible fraction", "chamfer_m", 1000, 2),
+        ("Volumetric IoU by visible fraction", "iou", 1, 3),
+        ("Stable fraction by visible fraction", "stable_fraction", 1, 3),
+    ):
+        lines += [
+            "",
+            f"## {title}",
+            "",
+            "| method | " + " | ".join(labels) + " |",
+            "|---|" + "---|" * len(labels),
+            f"| objects | {counts} |",
+        ]
         for name in ok:
             if key != "stable_fraction" and name == GROUND_TRUTH:
                 continue
@@ -802,31 +897,48 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
             lines.append(f"| {name} | " + " | ".join(_fmt(bins[b][key], scale, digits) for b in labels) + " |")
     paired = summary["arm_vs_baseline_paired_chamfer"]
     if paired:
-        lines += ["", "## arm vs baseline, paired (objects both reconstructed)", "",
-                  "| visibility | objects | baseline mm | arm mm | reduction |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## arm vs baseline, paired (objects both reconstructed)",
+            "",
+            "| visibility | objects | baseline mm | arm mm | reduction |",
+            "|---|---|---|---|---|",
+        ]
         for label, p in [("all", paired), *paired["by_visibility"].items()]:
-            lines.append(f"| {label} | {p['n']} | {_fmt(p['baseline'], 1000, 2)} | {_fmt(p['arm'], 1000, 2)} "
-                         f"| {_fmt(p['reduction'], 100, 1)}{'%' if p['reduction'] is not None else ''} |")
+            lines.append(
+                f"| {label} | {p['n']} | {_fmt(p['baseline'], 1000, 2)} | {_fmt(p['arm'], 1000, 2)} "
+                f"| {_fmt(p['reduction'], 100, 1)}{'%' if p['reduction'] is not None else ''} |"
+            )
     lines += ["", "## Targets (issue 6)", "", "| target | measured | met |", "|---|---|---|"]
-    names = {"arm_chamfer_reduction_vs_baseline": ">= 28% lower Chamfer than baseline",
-             "arm_lower_chamfer_every_bin_below_0.6": "lower Chamfer than baseline in every bin below 0.6",
-             "arm_stable_fraction": "arm stable fraction >= 0.9",
-             "arm_stable_gap_to_ground_truth": "arm within 5 points of ground truth"}
+    names = {
+        "arm_chamfer_reduction_vs_baseline": ">= 28% lower Chamfer than baseline",
+        "arm_lower_chamfer_every_bin_below_0.6": "lower Chamfer than baseline in every bin below 0.6",
+        "arm_stable_fraction": "arm stable fraction >= 0.9",
+        "arm_stable_gap_to_ground_truth": "arm within 5 points of ground truth",
+    }
     for key, t in summary["targets"].items():
         value = t["value"]
-        shown = ", ".join(f"{k}: {'-' if v is None else 'yes' if v else 'no'}" for k, v in value.items()) \
-            if isinstance(value, dict) else f"{value:.3f}"
+        shown = (
+            ", ".join(f"{k}: {'-' if v is None else 'yes' if v else 'no'}" for k, v in value.items())
+            if isinstance(value, dict)
+            else f"{value:.3f}"
+        )
         lines.append(f"| {names[key]} | {shown} | {'yes' if t['met'] else 'no'} |")
     run = summary.get("run", {})
     if run:
         runtime_met = run["scenes_computed"] == summary["scenes"] and run["wall_s"] <= TARGET_RUNTIME_S
-        lines.append(f"| default run under 15 min on this machine | {run['wall_s'] / 60:.1f} min wall, "
-                     f"{run['cpu_s'] / 60:.1f} min process CPU "
-                     f"({run['scenes_computed']} of {summary['scenes']} scenes computed in this run) "
-                     f"| {'yes' if runtime_met else 'no' if run['scenes_computed'] == summary['scenes'] else 'n/a'} |")
-        lines += ["", f"Machine: {run['machine']}, {run['cpu_count']} CPUs, torch threads {cfg['threads']}, "
-                  f"load average {run['load_average']:.1f} at the end (the machine is shared). Sum of per-scene "
-                  f"compute over all scenes (cached included): {summary['scene_compute_s'] / 60:.1f} min."]
+        lines.append(
+            f"| default run under 15 min on this machine | {run['wall_s'] / 60:.1f} min wall, "
+            f"{run['cpu_s'] / 60:.1f} min process CPU "
+            f"({run['scenes_computed']} of {summary['scenes']} scenes computed in this run) "
+            f"| {'yes' if runtime_met else 'no' if run['scenes_computed'] == summary['scenes'] else 'n/a'} |"
+        )
+        lines += [
+            "",
+            f"Machine: {run['machine']}, {run['cpu_count']} CPUs, torch threads {cfg['threads']}, "
+            f"load average {run['load_average']:.1f} at the end (the machine is shared). Sum of per-scene "
+            f"compute over all scenes (cached included): {summary['scene_compute_s'] / 60:.1f} min.",
+        ]
     lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figures]
     path.write_text("\n".join(lines) + "\n")
 
@@ -838,6 +950,7 @@ def _heldout() -> tuple:
 
 
 # --- entry point --------------------------------------------------------------------------------
+
 
 def run(config: BenchConfig, progress: bool = True) -> dict:
     """Run (or resume) the benchmark and write its outputs; returns the summary."""
@@ -870,10 +983,14 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
         plot_qualitative(cases, out / "qualitative.png")
         figures.append("qualitative.png")
     summary["run"] = {
-        "wall_s": time.perf_counter() - started, "cpu_s": time.process_time() - started_cpu,
-        "scenes_computed": computed, "cache": str(cache_dir),
-        "machine": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-        "load_average": os.getloadavg()[0], "command": "bench_recon " + " ".join(sys.argv[1:]),
+        "wall_s": time.perf_counter() - started,
+        "cpu_s": time.process_time() - started_cpu,
+        "scenes_computed": computed,
+        "cache": str(cache_dir),
+        "machine": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "load_average": os.getloadavg()[0],
+        "command": "bench_recon " + " ".join(sys.argv[1:]),
     }
     write_report(summary, out / "report.md", figures)
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
@@ -882,29 +999,42 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
 
 def parse_args(argv=None) -> BenchConfig:
     defaults = BenchConfig()
-    parser = argparse.ArgumentParser(prog="bench_recon", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="bench_recon", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--scenes", type=int, default=defaults.scenes, help="number of scenes (one view each)")
     parser.add_argument("--seed", type=int, default=defaults.seed, help="base seed of the scenes")
-    parser.add_argument("--objects", default="", help="folder of .obj/.stl/.ply meshes in metres (default: the "
-                        "procedural held-out categories)")
+    parser.add_argument(
+        "--objects",
+        default="",
+        help="folder of .obj/.stl/.ply meshes in metres (default: the procedural held-out categories)",
+    )
     parser.add_argument("--segmentation", choices=("ground-truth", "predicted"), default=defaults.segmentation)
     parser.add_argument("--out", default=defaults.out, help="output folder")
-    parser.add_argument("--methods", default=",".join(ALL_METHODS), help="comma-separated subset of "
-                        + ", ".join(ALL_METHODS))
+    parser.add_argument(
+        "--methods", default=",".join(ALL_METHODS), help="comma-separated subset of " + ", ".join(ALL_METHODS)
+    )
     parser.add_argument("--checkpoint-dir", default="", help="folder with <variant>.pt (default: the shipped ones)")
     parser.add_argument("--min-objects", type=int, default=defaults.min_objects)
     parser.add_argument("--max-objects", type=int, default=defaults.max_objects)
-    parser.add_argument("--min-visible-pixels", type=int, default=defaults.min_visible_pixels,
-                        help="objects with fewer pixels carrying depth are not evaluated")
+    parser.add_argument(
+        "--min-visible-pixels",
+        type=int,
+        default=defaults.min_visible_pixels,
+        help="objects with fewer pixels carrying depth are not evaluated",
+    )
     parser.add_argument("--chamfer-samples", type=int, default=defaults.chamfer_samples, help="points per surface")
     parser.add_argument("--iou-resolution", type=int, default=defaults.iou_resolution, help="voxels per side")
     parser.add_argument("--settle-s", type=float, default=defaults.settle_s, help="simulated seconds of gravity")
     parser.add_argument("--physics-timestep-s", type=float, default=defaults.physics_timestep_s)
     parser.add_argument("--stable-threshold-m", type=float, default=defaults.stable_threshold_m)
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
-    parser.add_argument("--view", choices=("occluded", "random"), default=defaults.view, help="occluded: of "
-                        "--view-candidates random views keep the one with the most partly occluded objects")
+    parser.add_argument(
+        "--view",
+        choices=("occluded", "random"),
+        default=defaults.view,
+        help="occluded: of --view-candidates random views keep the one with the most partly occluded objects",
+    )
     parser.add_argument("--view-candidates", type=int, default=defaults.view_candidates)
     parser.add_argument("--qualitative", type=int, default=defaults.qualitative, help="rows of qualitative.png")
     parser.add_argument("--threads", type=int, default=defaults.threads, help="torch CPU threads")
@@ -920,13 +1050,26 @@ def parse_args(argv=None) -> BenchConfig:
     if not 0 < args.physics_timestep_s <= 0.02 or min(args.threads, args.view_candidates) < 1 or args.qualitative < 0:
         parser.error("need 0 < --physics-timestep-s <= 0.02, --threads and --view-candidates >= 1, --qualitative >= 0")
     return BenchConfig(
-        scenes=args.scenes, seed=args.seed, objects=args.objects, segmentation=args.segmentation, out=args.out,
-        methods=tuple(m for m in ALL_METHODS if m in methods), checkpoint_dir=args.checkpoint_dir,
-        min_objects=args.min_objects, max_objects=args.max_objects, min_visible_pixels=args.min_visible_pixels,
-        chamfer_samples=args.chamfer_samples, iou_resolution=args.iou_resolution, settle_s=args.settle_s,
-        physics_timestep_s=args.physics_timestep_s, stable_threshold_m=args.stable_threshold_m,
-        depth_noise=not args.no_noise, view=args.view, view_candidates=args.view_candidates,
-        qualitative=args.qualitative, threads=args.threads,
+        scenes=args.scenes,
+        seed=args.seed,
+        objects=args.objects,
+        segmentation=args.segmentation,
+        out=args.out,
+        methods=tuple(m for m in ALL_METHODS if m in methods),
+        checkpoint_dir=args.checkpoint_dir,
+        min_objects=args.min_objects,
+        max_objects=args.max_objects,
+        min_visible_pixels=args.min_visible_pixels,
+        chamfer_samples=args.chamfer_samples,
+        iou_resolution=args.iou_resolution,
+        settle_s=args.settle_s,
+        physics_timestep_s=args.physics_timestep_s,
+        stable_threshold_m=args.stable_threshold_m,
+        depth_noise=not args.no_noise,
+        view=args.view,
+        view_candidates=args.view_candidates,
+        qualitative=args.qualitative,
+        threads=args.threads,
     )
 
 

@@ -86,9 +86,7 @@ def generate_shard(
             for view_index in range(views_per_scene):
                 T_world_camera = sample_camera_pose(rng, scene.table_centre)
                 frame = world.render(T_world_camera, rng=rng)
-                pixels = np.bincount(
-                    frame.labels[frame.depth_m > 0].ravel(), minlength=len(scene.objects) + 1
-                )[1:]
+                pixels = np.bincount(frame.labels[frame.depth_m > 0].ravel(), minlength=len(scene.objects) + 1)[1:]
                 visible_ids = [int(i) + 1 for i in np.flatnonzero(pixels >= min_visible_pixels)]
                 if not visible_ids:
                     continue
@@ -120,8 +118,19 @@ def generate_shard(
 
 
 _SAMPLE_KEYS = (
-    "grids", "occupancy", "others", "visible_fraction", "visible_pixels", "category", "object_scale",
-    "scene_index", "view_index", "object_index", "grid_origin_world", "voxel_size_m", "table_height_m",
+    "grids",
+    "occupancy",
+    "others",
+    "visible_fraction",
+    "visible_pixels",
+    "category",
+    "object_scale",
+    "scene_index",
+    "view_index",
+    "object_index",
+    "grid_origin_world",
+    "voxel_size_m",
+    "table_height_m",
     "T_world_camera",
 )
 
@@ -269,8 +278,12 @@ def generate(
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default=str(DEFAULT_OUT), help="dataset root (shards go to <out>/<split>/)")
-    parser.add_argument("--split", choices=sorted(SPLIT_SEED_OFFSET), default="train",
-                        help="train: training categories; test: held-out categories")
+    parser.add_argument(
+        "--split",
+        choices=sorted(SPLIT_SEED_OFFSET),
+        default="train",
+        help="train: training categories; test: held-out categories",
+    )
     parser.add_argument("--shards", type=int, default=10, help="number of shards (one seed each)")
     parser.add_argument("--first-seed", type=int, default=0, help="seed of the first shard")
     parser.add_argument("--workers", type=int, default=1, help="parallel processes")
@@ -283,9 +296,16 @@ def main(argv=None) -> int:
     if args.shards < 0 or args.workers < 1 or args.views_per_scene < 1 or args.scenes_per_shard < 1:
         parser.error("--shards must be >= 0, --workers, --views-per-scene and --scenes-per-shard >= 1")
     summary = generate(
-        args.out, args.split, args.shards, args.first_seed, args.workers,
-        resolution=args.resolution, k=args.k, scenes_per_shard=args.scenes_per_shard,
-        views_per_scene=args.views_per_scene, min_visible_pixels=args.min_visible_pixels,
+        args.out,
+        args.split,
+        args.shards,
+        args.first_seed,
+        args.workers,
+        resolution=args.resolution,
+        k=args.k,
+        scenes_per_shard=args.scenes_per_shard,
+        views_per_scene=args.views_per_scene,
+        min_visible_pixels=args.min_visible_pixels,
     )
     print(json.dumps(summary, indent=1))
     return 0

@@ -103,8 +103,9 @@ def grid_from_msg(msg: GridMetadata) -> GridFrame | None:
 
 
 def object_to_msg(obj: ReconstructedObject) -> ReconstructedObjectMsg:
-    return object_msg(obj.id, obj.T_world_object, obj.mesh, obj.convex_parts, obj.visible_fraction, obj.method,
-                      grid_to_msg(obj.grid))
+    return object_msg(
+        obj.id, obj.T_world_object, obj.mesh, obj.convex_parts, obj.visible_fraction, obj.method, grid_to_msg(obj.grid)
+    )
 
 
 def object_from_msg(msg: ReconstructedObjectMsg) -> ReconstructedObject:

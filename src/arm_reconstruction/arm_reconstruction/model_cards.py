@@ -88,8 +88,10 @@ def _seed_text(seeds) -> str:
 
 
 def _connectivity_text(training: dict) -> str:
-    return (f" (grid coarsened by {training.get('connectivity_factor')}, "
-            f"{training.get('connectivity_endpoints')} endpoints)")
+    return (
+        f" (grid coarsened by {training.get('connectivity_factor')}, "
+        f"{training.get('connectivity_endpoints')} endpoints)"
+    )
 
 
 def _number(value) -> str:

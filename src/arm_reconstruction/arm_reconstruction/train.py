@@ -102,9 +102,7 @@ def _device(name: str, local_rank: int) -> torch.device:
 def losses_for_batch(logits, batch, config: TrainConfig) -> dict[str, torch.Tensor]:
     """The variant's loss terms (unweighted) and their weighted sum under ``total``."""
     terms = {
-        "reconstruction": reconstruction_loss(
-            logits, batch["occupancy"], config.pos_weight, config.surface_weight
-        )
+        "reconstruction": reconstruction_loss(logits, batch["occupancy"], config.pos_weight, config.surface_weight)
     }
     total = terms["reconstruction"]
     unobserved = batch["grids"][:, 3] > 0.5
@@ -120,8 +118,9 @@ def losses_for_batch(logits, batch, config: TrainConfig) -> dict[str, torch.Tens
     return terms
 
 
-def voxel_metrics(probabilities: np.ndarray, occupancy: np.ndarray, voxel_size_m: np.ndarray,
-                  others: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def voxel_metrics(
+    probabilities: np.ndarray, occupancy: np.ndarray, voxel_size_m: np.ndarray, others: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """Per-sample IoU at 0.5, symmetric voxel Chamfer distance (metres: mean distance from each
     predicted voxel centre to the nearest true one plus the converse), whether the thresholded
     prediction is statically stable (stability prior P(E) > 0.5 on 0/1 occupancy, table and the
@@ -161,8 +160,10 @@ def evaluate(model, dataset: VoxelDataset, device, max_samples: int = 512, batch
             batch = dataset.batch(index, device)
             logits = model(select_input_channels(batch["grids"], model.in_channels))
             metrics = voxel_metrics(
-                torch.sigmoid(logits).float().cpu().numpy(), batch["occupancy"].cpu().numpy(),
-                dataset.info["voxel_size_m"][index], batch["others"].cpu().numpy(),
+                torch.sigmoid(logits).float().cpu().numpy(),
+                batch["occupancy"].cpu().numpy(),
+                dataset.info["voxel_size_m"][index],
+                batch["others"].cpu().numpy(),
             )
             metrics["visible_fraction"] = dataset.info["visible_fraction"][index]
             for key, value in metrics.items():
@@ -283,12 +284,20 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
 
     def save_state() -> None:
         if rank == 0:
-            _save_state(state_path, {
-                "config": dataclasses.asdict(config), "model": model.state_dict(),
-                "optimizer": optimizer.state_dict(), "step": step, "history": history,
-                "evaluations": evaluations, "elapsed_s": elapsed_s,
-                "numpy_rng": [rng.bit_generator.state], "augment_rng": augment_generator.get_state(),
-            })
+            _save_state(
+                state_path,
+                {
+                    "config": dataclasses.asdict(config),
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "step": step,
+                    "history": history,
+                    "evaluations": evaluations,
+                    "elapsed_s": elapsed_s,
+                    "numpy_rng": [rng.bit_generator.state],
+                    "augment_rng": augment_generator.get_state(),
+                },
+            )
 
     stop = _StopFlag()
     memory_format = torch.channels_last_3d if device.type == "cpu" else torch.contiguous_format
@@ -358,9 +367,15 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
     if config.save_float16:
         model.half()  # half the file size; load_checkpoint copies the weights into a float32 model
     save_checkpoint(
-        config.out, model, config={"training": dataclasses.asdict(config)},
-        extra={**result, "weights_dtype": "float16" if config.save_float16 else "float32",
-               "evaluations": evaluations, "loss_history": _thin(history, 400)},
+        config.out,
+        model,
+        config={"training": dataclasses.asdict(config)},
+        extra={
+            **result,
+            "weights_dtype": "float16" if config.save_float16 else "float32",
+            "evaluations": evaluations,
+            "loss_history": _thin(history, 400),
+        },
     )
     model.float()
     (work_dir / "result.json").write_text(json.dumps(result, indent=1))
@@ -427,15 +442,24 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--steps", type=int, default=defaults.steps)
     parser.add_argument("--batch-size", type=int, default=defaults.batch_size, help="global batch size")
     parser.add_argument("--lr", type=float, default=defaults.lr)
-    parser.add_argument("--pos-weight", type=float, default=defaults.pos_weight,
-                        help="cross-entropy weight of occupied voxels")
+    parser.add_argument(
+        "--pos-weight", type=float, default=defaults.pos_weight, help="cross-entropy weight of occupied voxels"
+    )
     parser.add_argument("--surface-weight", type=float, default=defaults.surface_weight)
     parser.add_argument("--stability-weight", type=float, default=defaults.stability_weight)
     parser.add_argument("--connectivity-weight", type=float, default=defaults.connectivity_weight)
-    parser.add_argument("--connectivity-factor", type=int, default=defaults.connectivity_factor,
-                        help="coarsening of the grid for the connectivity prior")
-    parser.add_argument("--connectivity-endpoints", type=int, default=defaults.connectivity_endpoints,
-                        help="existing cells sampled as path endpoints per object")
+    parser.add_argument(
+        "--connectivity-factor",
+        type=int,
+        default=defaults.connectivity_factor,
+        help="coarsening of the grid for the connectivity prior",
+    )
+    parser.add_argument(
+        "--connectivity-endpoints",
+        type=int,
+        default=defaults.connectivity_endpoints,
+        help="existing cells sampled as path endpoints per object",
+    )
     parser.add_argument("--base-channels", type=int, default=defaults.base_channels)
     parser.add_argument("--no-augment", action="store_true", help="no random grid rotations/mirrors")
     parser.add_argument("--device", default=defaults.device, help="auto (cuda when present), cpu or cuda")
@@ -444,19 +468,32 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--eval-every", type=int, default=defaults.eval_every)
     parser.add_argument("--eval-samples", type=int, default=defaults.eval_samples)
-    parser.add_argument("--init-from", default="", help="start from another run's state.pt (same input "
-                        "channels: weights, optimiser, step and history) when --work-dir has no state yet")
+    parser.add_argument(
+        "--init-from",
+        default="",
+        help="start from another run's state.pt (same input "
+        "channels: weights, optimiser, step and history) when --work-dir has no state yet",
+    )
     parser.add_argument("--save-float32", action="store_true", help="store float32 weights (default float16)")
-    parser.add_argument("--final-eval-samples", type=int, default=defaults.final_eval_samples,
-                        help="held-out samples for the final metrics (0: all)")
-    parser.add_argument("--time-limit-min", type=float, default=defaults.time_limit_min,
-                        help="stop after this many minutes of this session and finish (0: no limit)")
+    parser.add_argument(
+        "--final-eval-samples",
+        type=int,
+        default=defaults.final_eval_samples,
+        help="held-out samples for the final metrics (0: all)",
+    )
+    parser.add_argument(
+        "--time-limit-min",
+        type=float,
+        default=defaults.time_limit_min,
+        help="stop after this many minutes of this session and finish (0: no limit)",
+    )
     return parser
 
 
 def config_from_args(args) -> TrainConfig:
-    values = {field.name: getattr(args, field.name) for field in dataclasses.fields(TrainConfig)
-              if hasattr(args, field.name)}
+    values = {
+        field.name: getattr(args, field.name) for field in dataclasses.fields(TrainConfig) if hasattr(args, field.name)
+    }
     values["augment"] = not args.no_augment
     values["save_float16"] = not args.save_float32
     return TrainConfig(**values)
@@ -466,8 +503,15 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = _parser()
     args = parser.parse_args(argv)
-    numbers = (args.steps, args.batch_size, args.checkpoint_every, args.connectivity_factor,
-               args.connectivity_endpoints, args.base_channels, args.threads)
+    numbers = (
+        args.steps,
+        args.batch_size,
+        args.checkpoint_every,
+        args.connectivity_factor,
+        args.connectivity_endpoints,
+        args.base_channels,
+        args.threads,
+    )
     if min(numbers) < 1 or args.lr <= 0 or min(args.stability_weight, args.connectivity_weight) < 0:
         parser.error("counts must be >= 1, --lr > 0 and the loss weights >= 0")
     config = config_from_args(args)

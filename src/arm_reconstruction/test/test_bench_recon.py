@@ -62,7 +62,13 @@ def test_instances_are_matched_one_to_one_above_half_overlap():
 
 def test_bins_and_intervals():
     assert [visibility_bin(v) for v in (0.0, 0.19, 0.2, 0.59, 0.8, 1.0)] == [
-        "0.0-0.2", "0.0-0.2", "0.2-0.4", "0.4-0.6", "0.8-1.0", "0.8-1.0"]
+        "0.0-0.2",
+        "0.0-0.2",
+        "0.2-0.4",
+        "0.4-0.6",
+        "0.8-1.0",
+        "0.8-1.0",
+    ]
     low, high = wilson(9, 10)
     assert low < 0.9 < high <= 1.0 and wilson(0, 0) == [None, None]
     low, high = bootstrap_ci(np.arange(100.0))
@@ -89,16 +95,36 @@ def baseline_only_checkpoints(tmp_path_factory):
     write_box_dataset(root, "train", shards=1, per_shard=8, seed=0)
     write_box_dataset(root, "test", shards=1, per_shard=4, seed=1)
     folder = tmp_path_factory.mktemp("checkpoints")
-    config = TrainConfig(variant="baseline", data=str(root), out=str(folder / "baseline.pt"), steps=2, batch_size=4,
-                         base_channels=8, device="cpu", checkpoint_every=1, eval_every=2, eval_samples=4)
+    config = TrainConfig(
+        variant="baseline",
+        data=str(root),
+        out=str(folder / "baseline.pt"),
+        steps=2,
+        batch_size=4,
+        base_channels=8,
+        device="cpu",
+        checkpoint_every=1,
+        eval_every=2,
+        eval_samples=4,
+    )
     train(config, progress=False)
     return folder
 
 
 def small_config(out, checkpoints, **changes):
-    fields = dict(scenes=1, seed=3, min_objects=3, max_objects=4, view="random", out=str(out),
-                  methods=("visible-only", "baseline", "arm", "ground-truth"), checkpoint_dir=str(checkpoints),
-                  chamfer_samples=512, iou_resolution=32, qualitative=1)
+    fields = dict(
+        scenes=1,
+        seed=3,
+        min_objects=3,
+        max_objects=4,
+        view="random",
+        out=str(out),
+        methods=("visible-only", "baseline", "arm", "ground-truth"),
+        checkpoint_dir=str(checkpoints),
+        chamfer_samples=512,
+        iou_resolution=32,
+        qualitative=1,
+    )
     return BenchConfig(**(fields | changes))
 
 
@@ -133,8 +159,13 @@ def test_end_to_end_run_reports_measured_methods_and_skips_missing_ones(tmp_path
 
 @pytest.mark.slow
 def test_predicted_segmentation_is_matched_to_the_true_objects(tmp_path, baseline_only_checkpoints):
-    config = small_config(tmp_path, baseline_only_checkpoints, segmentation="predicted",
-                          methods=("visible-only", "ground-truth"), qualitative=0)
+    config = small_config(
+        tmp_path,
+        baseline_only_checkpoints,
+        segmentation="predicted",
+        methods=("visible-only", "ground-truth"),
+        qualitative=0,
+    )
     summary = run(config, progress=False)
     visible = summary["methods"]["visible-only"]
     assert 0 <= summary["objects_matched"] <= summary["objects"]
@@ -149,17 +180,40 @@ def test_visible_only_needs_no_checkpoint(tmp_path):
 
 def synthetic_results():
     """Two objects: arm halves baseline's Chamfer; one arm object and the baseline ones move."""
+
     def entry(chamfer, moved):
-        return {"empty": chamfer is None, "chamfer_m": chamfer, "iou": 0.0 if chamfer is None else 0.5,
-                "displacement_m": moved}
+        return {
+            "empty": chamfer is None,
+            "chamfer_m": chamfer,
+            "iou": 0.0 if chamfer is None else 0.5,
+            "displacement_m": moved,
+        }
 
     rows = [
-        {"scene": 0, "object": 0, "category": "vase", "visible_fraction": 0.1, "matched": True,
-         "methods": {"baseline": entry(0.02, 0.05), "arm": entry(0.01, 0.001),
-                     "ground-truth": {**entry(None, 0.0), "empty": False, "iou": None}}},
-        {"scene": 0, "object": 1, "category": "lamp", "visible_fraction": 0.9, "matched": True,
-         "methods": {"baseline": entry(0.004, 0.02), "arm": entry(0.002, 0.03),
-                     "ground-truth": {**entry(None, 0.002), "empty": False, "iou": None}}},
+        {
+            "scene": 0,
+            "object": 0,
+            "category": "vase",
+            "visible_fraction": 0.1,
+            "matched": True,
+            "methods": {
+                "baseline": entry(0.02, 0.05),
+                "arm": entry(0.01, 0.001),
+                "ground-truth": {**entry(None, 0.0), "empty": False, "iou": None},
+            },
+        },
+        {
+            "scene": 0,
+            "object": 1,
+            "category": "lamp",
+            "visible_fraction": 0.9,
+            "matched": True,
+            "methods": {
+                "baseline": entry(0.004, 0.02),
+                "arm": entry(0.002, 0.03),
+                "ground-truth": {**entry(None, 0.002), "empty": False, "iou": None},
+            },
+        },
     ]
     timing = {m: {"total_s": 1.0} for m in ("baseline", "arm", "ground-truth")}
     return [{"scene": 0, "rows": rows, "timing_s": timing, "wall_s": 3.0, "cpu_s": 2.0}]
@@ -179,8 +233,11 @@ def test_summary_and_targets_follow_the_measurements():
     targets = summary["targets"]
     assert targets["arm_chamfer_reduction_vs_baseline"]["value"] == pytest.approx(0.5)
     assert targets["arm_chamfer_reduction_vs_baseline"]["met"]
-    assert targets["arm_lower_chamfer_every_bin_below_0.6"]["value"] == {"0.0-0.2": True, "0.2-0.4": None,
-                                                                        "0.4-0.6": None}
+    assert targets["arm_lower_chamfer_every_bin_below_0.6"]["value"] == {
+        "0.0-0.2": True,
+        "0.2-0.4": None,
+        "0.4-0.6": None,
+    }
     assert not targets["arm_lower_chamfer_every_bin_below_0.6"]["met"], "bins without objects are not met"
     assert not targets["arm_stable_fraction"]["met"]
     assert targets["arm_stable_gap_to_ground_truth"]["value"] == pytest.approx(0.5)
@@ -192,9 +249,15 @@ def test_plots_and_report_are_written(tmp_path):
     bench_recon.plot_by_visibility(summary, tmp_path / "a.png")
     bench_recon.plot_stability(summary, tmp_path / "b.png")
     box = trimesh.creation.box(extents=(0.05, 0.05, 0.1))
-    case = {"rgb": np.zeros((40, 40, 3), np.uint8), "visible": np.eye(40, dtype=bool),
-            "silhouette": np.ones((40, 40), bool), "camera_eye": np.array([1.0, 0.0, 0.5]), "category": "vase",
-            "visible_fraction": 0.1, "arm_chamfer_m": 0.004}
+    case = {
+        "rgb": np.zeros((40, 40, 3), np.uint8),
+        "visible": np.eye(40, dtype=bool),
+        "silhouette": np.ones((40, 40), bool),
+        "camera_eye": np.array([1.0, 0.0, 0.5]),
+        "category": "vase",
+        "visible_fraction": 0.1,
+        "arm_chamfer_m": 0.004,
+    }
     for name in ("baseline", "arm", "ground-truth"):
         case[name] = (box.vertices, box.faces)
     bench_recon.plot_qualitative([case], tmp_path / "c.png")

@@ -17,9 +17,18 @@ def box_data(tmp_path_factory):
 
 
 def _config(root, tmp_path, variant="arm", steps=3, **overrides):
-    values = dict(variant=variant, data=str(root), out=str(tmp_path / f"{variant}.pt"), steps=steps,
-                  batch_size=4, base_channels=8, device="cpu", checkpoint_every=1, eval_every=2,
-                  eval_samples=4)
+    values = dict(
+        variant=variant,
+        data=str(root),
+        out=str(tmp_path / f"{variant}.pt"),
+        steps=steps,
+        batch_size=4,
+        base_channels=8,
+        device="cpu",
+        checkpoint_every=1,
+        eval_every=2,
+        eval_samples=4,
+    )
     values.update(overrides)
     return TrainConfig(**values)
 
@@ -98,5 +107,4 @@ def test_ablation_can_start_from_a_shared_trunk(box_data, tmp_path):
     history = read_checkpoint(tmp_path / "arm" / "arm.pt")["extra"]["loss_history"]
     assert result["steps"] == 3 and "connectivity" in history[-1] and "connectivity" not in history[0]
     with pytest.raises(SystemExit):
-        train(_config(box_data, tmp_path / "base", variant="baseline", steps=3, init_from=str(trunk)),
-              progress=False)
+        train(_config(box_data, tmp_path / "base", variant="baseline", steps=3, init_from=str(trunk)), progress=False)

@@ -110,10 +110,13 @@ def segment_baseline(rgb, depth_m, K, T_world_camera, params: BaselineParams | N
     flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
     unique_keys, voxel_of_point = np.unique(flat, return_inverse=True)
     voxel_count = np.bincount(voxel_of_point, minlength=len(unique_keys))
-    voxel_points = np.stack(
-        [np.bincount(voxel_of_point, weights=above_points[:, k], minlength=len(unique_keys)) for k in range(3)],
-        axis=1,
-    ) / voxel_count[:, None]
+    voxel_points = (
+        np.stack(
+            [np.bincount(voxel_of_point, weights=above_points[:, k], minlength=len(unique_keys)) for k in range(3)],
+            axis=1,
+        )
+        / voxel_count[:, None]
+    )
     cluster = dbscan(voxel_points, params.eps_m, params.min_samples)
     point_cluster = cluster[voxel_of_point]
     sizes = np.bincount(point_cluster[point_cluster >= 0])

@@ -26,21 +26,32 @@ from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import segment
 
 METHODS = {"arm_default": segment, "baseline_ransac_dbscan": segment_baseline}
-METRIC_KEYS = ("overlap_precision", "overlap_recall", "overlap_f", "boundary_precision", "boundary_recall",
-               "boundary_f", "f_at_75")
+METRIC_KEYS = (
+    "overlap_precision",
+    "overlap_recall",
+    "overlap_f",
+    "boundary_precision",
+    "boundary_recall",
+    "boundary_f",
+    "f_at_75",
+)
 
 
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", type=int, default=20, help="number of simulated scenes")
     parser.add_argument("--seed", type=int, default=0, help="base seed of the scenes")
-    parser.add_argument("--objects", default=None, help="folder of .obj/.stl/.ply meshes used as the object pool "
-                        "(default: the procedural held-out categories)")
+    parser.add_argument(
+        "--objects",
+        default=None,
+        help="folder of .obj/.stl/.ply meshes used as the object pool (default: the procedural held-out categories)",
+    )
     parser.add_argument("--out", default="results/seg", help="output folder")
     parser.add_argument("--min-objects", type=int, default=3)
     parser.add_argument("--max-objects", type=int, default=20)
-    parser.add_argument("--dense", type=int, default=12, help="scenes with at least this many objects form the "
-                        "dense subset")
+    parser.add_argument(
+        "--dense", type=int, default=12, help="scenes with at least this many objects form the dense subset"
+    )
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
     parser.add_argument("--examples", type=int, default=4, help="example frames in examples.png")
     args = parser.parse_args(argv)
@@ -79,8 +90,14 @@ def render_scene(index: int, args, pool):
         frame = world.render(camera, noise=DepthNoise(enabled=not args.no_noise), rng=rng, with_visibility=False)
     finally:
         world.close()
-    return {"rgb": frame.rgb, "depth": frame.depth_m, "labels": frame.labels, "K": frame.K,
-            "T": frame.T_world_camera, "n_objects": len(scene.objects)}
+    return {
+        "rgb": frame.rgb,
+        "depth": frame.depth_m,
+        "labels": frame.labels,
+        "K": frame.K,
+        "T": frame.T_world_camera,
+        "n_objects": len(scene.objects),
+    }
 
 
 def load_or_render(index: int, args, pool_factory, frames_dir: pathlib.Path):
@@ -104,8 +121,12 @@ def score_scene(frame) -> dict:
         latency_ms = 1e3 * (time.perf_counter() - start)
         cpu_ms = 1e3 * (time.process_time() - start_cpu)
         metrics = segmentation_metrics(labels, gt)
-        result[name] = {**{k: float(metrics[k]) for k in METRIC_KEYS}, "n_pred": metrics["n_pred"],
-                        "latency_ms": latency_ms, "cpu_ms": cpu_ms}
+        result[name] = {
+            **{k: float(metrics[k]) for k in METRIC_KEYS},
+            "n_pred": metrics["n_pred"],
+            "latency_ms": latency_ms,
+            "cpu_ms": cpu_ms,
+        }
     return result
 
 
@@ -172,28 +193,34 @@ def write_metric_plot(path: pathlib.Path, subsets: dict) -> None:
 
 def write_report(path: pathlib.Path, summary: dict, args) -> None:
     lines = ["# Unseen-object instance segmentation benchmark", ""]
-    lines.append(f"{summary['scenes']} simulated cluttered scenes ({args.min_objects}-{args.max_objects} objects, "
-                 f"pool: {summary['object_pool']}, seed {args.seed}, depth noise "
-                 f"{'off' if args.no_noise else 'on'}), 640x480 frames. Metrics as in the UOIS papers "
-                 "(Hungarian matching on overlap F; boundary tolerance ceil(0.003 x diagonal) px), averaged "
-                 "over frames. Latency: wall time per frame on this machine "
-                 f"({summary['machine']}, {summary['cpu_count']} CPUs, load average {summary['load_average']:.1f} "
-                 "while measured: the wall time includes waiting for a core); CPU: process CPU time per frame.")
+    lines.append(
+        f"{summary['scenes']} simulated cluttered scenes ({args.min_objects}-{args.max_objects} objects, "
+        f"pool: {summary['object_pool']}, seed {args.seed}, depth noise "
+        f"{'off' if args.no_noise else 'on'}), 640x480 frames. Metrics as in the UOIS papers "
+        "(Hungarian matching on overlap F; boundary tolerance ceil(0.003 x diagonal) px), averaged "
+        "over frames. Latency: wall time per frame on this machine "
+        f"({summary['machine']}, {summary['cpu_count']} CPUs, load average {summary['load_average']:.1f} "
+        "while measured: the wall time includes waiting for a core); CPU: process CPU time per frame."
+    )
     lines.append("")
     for subset, stats in summary["subsets"].items():
         lines.append(f"## {subset}: {stats.get('scenes', 0)} scenes")
         lines.append("")
-        lines.append("| method | overlap P | overlap R | overlap F | boundary P | boundary R | boundary F | F@75% "
-                     "| latency median ms | p90 ms | CPU median ms |")
+        lines.append(
+            "| method | overlap P | overlap R | overlap F | boundary P | boundary R | boundary F | F@75% "
+            "| latency median ms | p90 ms | CPU median ms |"
+        )
         lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for name in METHODS:
             if name not in stats:
                 continue
             s = stats[name]
-            lines.append(f"| {name} | {s['overlap_precision']:.3f} | {s['overlap_recall']:.3f} | "
-                         f"{s['overlap_f']:.3f} | {s['boundary_precision']:.3f} | {s['boundary_recall']:.3f} | "
-                         f"{s['boundary_f']:.3f} | {s['f_at_75']:.3f} | {s['latency_ms_median']:.0f} | "
-                         f"{s['latency_ms_p90']:.0f} | {s['cpu_ms_median']:.0f} |")
+            lines.append(
+                f"| {name} | {s['overlap_precision']:.3f} | {s['overlap_recall']:.3f} | "
+                f"{s['overlap_f']:.3f} | {s['boundary_precision']:.3f} | {s['boundary_recall']:.3f} | "
+                f"{s['boundary_f']:.3f} | {s['f_at_75']:.3f} | {s['latency_ms_median']:.0f} | "
+                f"{s['latency_ms_p90']:.0f} | {s['cpu_ms_median']:.0f} |"
+            )
         lines.append("")
     gain = summary.get("dense_overlap_f_gain_over_baseline")
     if gain is not None:
@@ -240,8 +267,10 @@ def main(argv=None) -> int:
             rows.append(row)
 
     dense = [r for r in rows if r["n_objects"] >= args.dense]
-    subsets = {"all": {"scenes": len(rows), **aggregate(rows)},
-               f"dense (>= {args.dense} objects)": {"scenes": len(dense), **aggregate(dense)}}
+    subsets = {
+        "all": {"scenes": len(rows), **aggregate(rows)},
+        f"dense (>= {args.dense} objects)": {"scenes": len(dense), **aggregate(dense)},
+    }
     summary = {
         "scenes": len(rows),
         "dense_scenes": len(dense),
@@ -262,12 +291,17 @@ def main(argv=None) -> int:
         )
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     examples = sorted(rows, key=lambda r: r["n_objects"])
-    picks = [examples[int(round(q * (len(examples) - 1)))]["index"] for q in np.linspace(0, 1, min(args.examples,
-                                                                                                   len(examples)))]
+    picks = [
+        examples[int(round(q * (len(examples) - 1)))]["index"]
+        for q in np.linspace(0, 1, min(args.examples, len(examples)))
+    ]
     picks = list(dict.fromkeys(picks))
     frames = [load_or_render(i, args, pool_factory, frames_dir) for i in picks]
-    write_examples(out / "examples.png", frames, [f"scene {i} ({int(f['n_objects'])} objects)"
-                                                  for i, f in zip(picks, frames, strict=True)])
+    write_examples(
+        out / "examples.png",
+        frames,
+        [f"scene {i} ({int(f['n_objects'])} objects)" for i, f in zip(picks, frames, strict=True)],
+    )
     write_metric_plot(out / "metrics.png", subsets)
     write_report(out / "report.md", summary, args)
     for subset, stats in subsets.items():
@@ -275,8 +309,10 @@ def main(argv=None) -> int:
         for name in METHODS:
             if name in stats:
                 s = stats[name]
-                print(f"  {name:24s} overlap F {s['overlap_f']:.3f}  boundary F {s['boundary_f']:.3f}  "
-                      f"F@75 {s['f_at_75']:.3f}  latency {s['latency_ms_median']:.0f} ms")
+                print(
+                    f"  {name:24s} overlap F {s['overlap_f']:.3f}  boundary F {s['boundary_f']:.3f}  "
+                    f"F@75 {s['f_at_75']:.3f}  latency {s['latency_ms_median']:.0f} ms"
+                )
     print(f"[bench_seg] wrote {out / 'summary.json'}, {out / 'report.md'}, examples.png, metrics.png")
     return 0
 

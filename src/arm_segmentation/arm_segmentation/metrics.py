@@ -63,8 +63,15 @@ def segmentation_metrics(prediction: np.ndarray, ground_truth: np.ndarray) -> di
         perfect = float(n_gt == 0 and n_pred == 0)
         p = 1.0 if n_pred == 0 else 0.0
         r = 1.0 if n_gt == 0 else 0.0
-        result.update(overlap_precision=p, overlap_recall=r, overlap_f=perfect,
-                      boundary_precision=p, boundary_recall=r, boundary_f=perfect, f_at_75=perfect)
+        result.update(
+            overlap_precision=p,
+            overlap_recall=r,
+            overlap_f=perfect,
+            boundary_precision=p,
+            boundary_recall=r,
+            boundary_f=perfect,
+            f_at_75=perfect,
+        )
         return result
     gt_first = int(gt_ids[0] != 0)
     pred_first = int(pred_ids[0] != 0)

@@ -81,8 +81,7 @@ def refine_full_resolution(
         return upsample(image[wy0:wy1, wx0:wx1], stride, (y1 - y0, x1 - x0))
 
     labels_crop = up(labels_work)
-    near = cv2.dilate((labels_crop > 0).astype(np.uint8), np.ones((3, 3), np.uint8),
-                      iterations=params.search_radius_px)
+    near = cv2.dilate((labels_crop > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=params.search_radius_px)
     K_crop = K.copy()
     K_crop[0, 2] -= x0
     K_crop[1, 2] -= y0

@@ -33,7 +33,10 @@ class SegmentationNode(Node):
         slop_s = declare(self, "sync_tolerance_s", 0.02, "Largest stamp difference within one frame, seconds", 0.0, 1.0)
         queue = declare(self, "sync_queue_size", 5, "Messages kept per input while matching stamps", 1, 50)
         reliability = declare(
-            self, "image_reliability", "best_effort", "Subscription QoS reliability",
+            self,
+            "image_reliability",
+            "best_effort",
+            "Subscription QoS reliability",
             choices=["best_effort", "reliable"],
         )
         stride = declare(self, "working_stride", 2, "Subsampling of the working grid (1 = full resolution)", 1, 4)
@@ -43,10 +46,18 @@ class SegmentationNode(Node):
         max_height = declare(self, "max_object_height_m", 0.6, "Tallest object above its table, metres", 0.02, 3.0)
         min_area = declare(self, "min_instance_area_m2", 3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
         use_colour = declare(self, "use_colour", True, "Use colour cues (off: geometry only)")
-        workspace_min = declare(self, "workspace_min_m", [-100.0, -100.0, -100.0],
-                                "World-frame box (lower corner, metres) outside which nothing is an object")
-        workspace_max = declare(self, "workspace_max_m", [100.0, 100.0, 100.0],
-                                "World-frame box (upper corner, metres) outside which nothing is an object")
+        workspace_min = declare(
+            self,
+            "workspace_min_m",
+            [-100.0, -100.0, -100.0],
+            "World-frame box (lower corner, metres) outside which nothing is an object",
+        )
+        workspace_max = declare(
+            self,
+            "workspace_max_m",
+            [100.0, 100.0, 100.0],
+            "World-frame box (upper corner, metres) outside which nothing is an object",
+        )
         if len(workspace_min) != 3 or len(workspace_max) != 3:
             raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
         self.params = SegmentationParams(

@@ -31,8 +31,17 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
     return T
 
 
-def render(boxes, T_world_camera, K=None, width=640, height=480, table_levels=((0.0, 0.5),),
-           table_rgb=(150, 130, 110), floor_z=-0.75, supports=()):
+def render(
+    boxes,
+    T_world_camera,
+    K=None,
+    width=640,
+    height=480,
+    table_levels=((0.0, 0.5),),
+    table_rgb=(150, 130, 110),
+    floor_z=-0.75,
+    supports=(),
+):
     """Ray-cast boxes standing on square table levels (height_m, half_extent_m) over a floor.
 
     `supports` are further boxes (shelves, steps) drawn in the table colour with label 0.

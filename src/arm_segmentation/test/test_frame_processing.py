@@ -66,8 +66,20 @@ def test_bgr_input_is_converted(scene):
     assert np.array_equal(image_to_numpy(frame.rgb), rgb)
 
 
-@pytest.mark.parametrize("problem", ["rgb_encoding", "depth_encoding", "size", "info_size", "zero_K",
-                                     "nan_pose", "short_data", "labels_size", "labels_encoding"])
+@pytest.mark.parametrize(
+    "problem",
+    [
+        "rgb_encoding",
+        "depth_encoding",
+        "size",
+        "info_size",
+        "zero_K",
+        "nan_pose",
+        "short_data",
+        "labels_size",
+        "labels_encoding",
+    ],
+)
 def test_malformed_frames_raise_frame_error(scene, problem):
     rgb, depth, gt, K = scene
     rgb_msg, depth_msg, info, pose = messages(rgb, depth, K)

@@ -33,8 +33,9 @@ def start(*params):
     cmd = [str(EXECUTABLE), "--ros-args", "--params-file", str(ROOT / "config" / "segmentation_node.yaml")]
     for p in params:
         cmd += ["-p", p]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(),
-                            start_new_session=True, text=True)
+    return subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True, text=True
+    )
 
 
 def stop(process) -> tuple[int, str]:
@@ -75,8 +76,12 @@ def frame_messages(stamp_s, rgb, depth, K, labels=None):
         return h
 
     pose = PoseStamped(header=header("world"), pose=matrix_to_pose(CAMERA))
-    msgs = [numpy_to_image(rgb, "rgb8", header()), numpy_to_image(depth, "32FC1", header()),
-            camera_info_from_K(K, depth.shape[1], depth.shape[0], header()), pose]
+    msgs = [
+        numpy_to_image(rgb, "rgb8", header()),
+        numpy_to_image(depth, "32FC1", header()),
+        camera_info_from_K(K, depth.shape[1], depth.shape[0], header()),
+        pose,
+    ]
     if labels is not None:
         msgs.append(numpy_to_image(labels, "16UC1", header()))
     return msgs
@@ -85,8 +90,10 @@ def frame_messages(stamp_s, rgb, depth, K, labels=None):
 @pytest.mark.slow
 @pytest.mark.parametrize("ground_truth", [False, True])
 def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_truth):
-    boxes = [Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
-             Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60))]
+    boxes = [
+        Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
+        Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60)),
+    ]
     rgb, depth, gt, K = render(boxes, CAMERA)
     depth = add_noise(depth, np.random.default_rng(0))
     node = start(f"use_ground_truth_masks:={str(ground_truth).lower()}", "image_reliability:=reliable")
@@ -94,8 +101,13 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
     probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
     probe.create_subscription(Image, "arm/segmentation/overlay", got["overlay"].append, 10)
     probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
-    topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"),
-              (CameraInfo, "camera/camera_info"), (PoseStamped, "camera/pose"), (Image, "sim/ground_truth/labels")]
+    topics = [
+        (Image, "camera/color/image_raw"),
+        (Image, "camera/depth/image_raw"),
+        (CameraInfo, "camera/camera_info"),
+        (PoseStamped, "camera/pose"),
+        (Image, "sim/ground_truth/labels"),
+    ]
     publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics[: 5 if ground_truth else 4]]
     try:
         assert spin_until(probe, lambda: all(p.get_subscription_count() > 0 for p in publishers), 30.0)
@@ -106,8 +118,12 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
                 rclpy.spin_once(probe, timeout_sec=gap_s)
 
         def diagnostics():
-            return [{kv.key: kv.value for kv in s.values} for d in got["diag"] for s in d.status
-                    if "segmentation_node" in s.name]
+            return [
+                {kv.key: kv.value for kv in s.values}
+                for d in got["diag"]
+                for s in d.status
+                if "segmentation_node" in s.name
+            ]
 
         def rejected(count):
             return lambda: any(d.get("frames_rejected") == str(count) for d in diagnostics())
@@ -133,8 +149,9 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
         spin_until(probe, lambda: False, 1.0)
         assert got["frames"] == [] and got["overlay"] == []
 
-        assert deliver(frame_messages(10.0, rgb, depth, K, labels),
-                       lambda: len(got["frames"]) == 1 and len(got["overlay"]) == 1)
+        assert deliver(
+            frame_messages(10.0, rgb, depth, K, labels), lambda: len(got["frames"]) == 1 and len(got["overlay"]) == 1
+        )
         frame = got["frames"][0]
         assert frame.header.stamp.sec == 10 and frame.world_frame_id == "world"
         predicted = image_to_numpy(frame.labels)

@@ -34,8 +34,10 @@ def main(argv=None) -> int:
     parser.add_argument("--only", nargs="*", default=None, help="module names to run (default: all)")
     args = parser.parse_args(argv)
     out = pathlib.Path(args.out)
-    figures = {"machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, python {platform.python_version()}",
-               "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S")}
+    figures = {
+        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, python {platform.python_version()}",
+        "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
     figures["cpu_count"] = os.cpu_count()
     for name, function in PERF_MEASUREMENTS:
         if args.only and name not in args.only and name.split(".")[0] not in args.only:

@@ -48,7 +48,10 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
 
 
 def sample_camera_pose(
-    rng: np.random.Generator, table_centre, min_distance_m: float = 0.125, max_distance_m: float = 1.5,
+    rng: np.random.Generator,
+    table_centre,
+    min_distance_m: float = 0.125,
+    max_distance_m: float = 1.5,
     min_elevation_deg: float = 15.0,
 ) -> np.ndarray:
     """A camera pose as in the paper's benchmark table: position uniform in the half-shell between

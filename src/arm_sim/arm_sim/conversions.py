@@ -174,8 +174,15 @@ def K_from_camera_info(info: CameraInfo) -> np.ndarray:
     return K
 
 
-def object_msg(object_id: int, T_world_object, mesh_local, convex_parts_local=(), visible_fraction: float = -1.0,
-               method: str = "", grid=None):
+def object_msg(
+    object_id: int,
+    T_world_object,
+    mesh_local,
+    convex_parts_local=(),
+    visible_fraction: float = -1.0,
+    method: str = "",
+    grid=None,
+):
     """Object-frame meshes (trimesh or (V, F)) + T_world_object -> arm_interfaces/ReconstructedObject."""
     from arm_interfaces.msg import ReconstructedObject
 
@@ -192,8 +199,9 @@ def _as_vf(mesh) -> tuple[np.ndarray, np.ndarray]:
     return (np.asarray(mesh.vertices), np.asarray(mesh.faces)) if hasattr(mesh, "vertices") else mesh
 
 
-def reconstructed_object_msg(object_id: int, mesh_world, convex_parts_world=(), visible_fraction: float = -1.0,
-                             method: str = "", grid=None):
+def reconstructed_object_msg(
+    object_id: int, mesh_world, convex_parts_world=(), visible_fraction: float = -1.0, method: str = "", grid=None
+):
     """World-frame meshes -> ReconstructedObject whose object frame is parallel to the world frame with its
     origin at the mesh's vertex centroid (see the message definition)."""
     vertices, faces = _as_vf(mesh_world)

@@ -17,8 +17,19 @@ COMMAND_NAMES = tuple(robot.JOINT_NAMES) + (robot.FINGER_JOINT_NAMES[0],)
 class SimSession:
     """A seeded cluttered scene with the robot, stepped in simulated time and rendered on demand."""
 
-    def __init__(self, seed=0, objects=None, split="heldout", n_objects=None, camera_eye=(0.7, 0.0, 0.5),
-                 camera_target=(0.0, 0.0, 0.05), width=640, height=480, fovy_deg=45.0, depth_noise=True):
+    def __init__(
+        self,
+        seed=0,
+        objects=None,
+        split="heldout",
+        n_objects=None,
+        camera_eye=(0.7, 0.0, 0.5),
+        camera_target=(0.0, 0.0, 0.05),
+        width=640,
+        height=480,
+        fovy_deg=45.0,
+        depth_noise=True,
+    ):
         self.rng = np.random.default_rng(seed)
         pool = object_pool(objects, split=split, seed=seed)
         self.scene = cluttered_scene(pool, self.rng, n_objects=n_objects)
@@ -67,8 +78,9 @@ class SimSession:
         self.world.close()
 
 
-def trajectory_targets(joint_names, times_s, positions, current: np.ndarray, dt_s: float,
-                       max_duration_s: float = 120.0) -> np.ndarray:
+def trajectory_targets(
+    joint_names, times_s, positions, current: np.ndarray, dt_s: float, max_duration_s: float = 120.0
+) -> np.ndarray:
     """Per-tick servo targets (N, 8) that linearly interpolate a joint trajectory from the current
     command. Joints missing from joint_names keep their current target. Raises ValueError."""
     names = list(joint_names)

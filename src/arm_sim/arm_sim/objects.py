@@ -42,9 +42,7 @@ def _hull(points: np.ndarray) -> trimesh.Trimesh:
 
 def _circle(radius: float, z: float, sections: int, centre=(0.0, 0.0)) -> np.ndarray:
     angle = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
-    return np.stack(
-        [centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle), np.full(sections, z)], 1
-    )
+    return np.stack([centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle), np.full(sections, z)], 1)
 
 
 def frustum(r_bottom: float, r_top: float, z0: float, z1: float, sections: int = 24) -> trimesh.Trimesh:
@@ -75,9 +73,7 @@ def revolved_shell(
     return parts
 
 
-def torus_arc(
-    major: float, minor: float, centre, start: float, stop: float, pieces: int = 6
-) -> list[trimesh.Trimesh]:
+def torus_arc(major: float, minor: float, centre, start: float, stop: float, pieces: int = 6) -> list[trimesh.Trimesh]:
     """A handle: an arc of a torus in the x-z plane as convex capsule-like pieces."""
     angles = np.linspace(start, stop, pieces + 1)
     centre = np.asarray(centre, dtype=np.float64)
@@ -166,9 +162,11 @@ def _wine_glass(rng):
     wall = 0.004
     z = np.linspace(stem_top, h, 4)
     radii = r * np.array([0.25, 0.8, 1.0, 0.9])
-    return [frustum(foot, foot, 0.0, 0.006), frustum(stem, stem, 0.0, stem_top + 0.005)] + revolved_shell(
-        radii, z, wall
-    ) + [frustum(0.25 * r, 0.25 * r, stem_top, stem_top + wall)]
+    return (
+        [frustum(foot, foot, 0.0, 0.006), frustum(stem, stem, 0.0, stem_top + 0.005)]
+        + revolved_shell(radii, z, wall)
+        + [frustum(0.25 * r, 0.25 * r, stem_top, stem_top + wall)]
+    )
 
 
 def _vase(rng):

@@ -77,8 +77,13 @@ def _capsule(body, start, end, radius: float, mass: float, rgba):
     if np.linalg.norm(end - start) < 1e-4:
         end = start + np.array([0.0, 0.0, 1e-3])
     body.add_geom(
-        type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.concatenate([start, end]).tolist(), size=[radius, 0, 0],
-        mass=mass, rgba=rgba, contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY,
+        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        fromto=np.concatenate([start, end]).tolist(),
+        size=[radius, 0, 0],
+        mass=mass,
+        rgba=rgba,
+        contype=ROBOT_CONTYPE,
+        conaffinity=ROBOT_CONAFFINITY,
     )
 
 
@@ -95,8 +100,12 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
         body.gravcomp = 1.0
         lo, hi = JOINT_LIMITS[i]
         body.add_joint(
-            name=JOINT_NAMES[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1], range=[lo, hi],
-            damping=10.0, armature=0.1,
+            name=JOINT_NAMES[i],
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=[0, 0, 1],
+            range=[lo, hi],
+            damping=10.0,
+            armature=0.1,
         )
         if i + 1 < len(PANDA_DH):
             a_next, d_next, alpha_next = PANDA_DH[i + 1]
@@ -109,38 +118,70 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
     hand = parent.add_body(name=HAND_NAME, pos=[0, 0, FLANGE_D_M], quat=[c, 0, 0, s])
     hand.gravcomp = 1.0
     hand.add_geom(
-        type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.02, 0.1, 0.025], pos=[0, 0, 0.03], mass=0.73, rgba=rgba,
-        contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.02, 0.1, 0.025],
+        pos=[0, 0, 0.03],
+        mass=0.73,
+        rgba=rgba,
+        contype=ROBOT_CONTYPE,
+        conaffinity=ROBOT_CONAFFINITY,
     )
     hand.add_site(name=TCP_SITE, pos=[0, 0, TCP_OFFSET_M], size=[0.005, 0, 0])
     for k, sign in enumerate((1.0, -1.0)):
         finger = hand.add_body(name=f"panda_finger{k + 1}", pos=[0, 0, 0.0584])
         finger.gravcomp = 1.0
         finger.add_joint(
-            name=FINGER_JOINT_NAMES[k], type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, sign, 0],
-            range=[0.0, GRIPPER_OPEN_M], damping=5.0, armature=0.05,
+            name=FINGER_JOINT_NAMES[k],
+            type=mujoco.mjtJoint.mjJNT_SLIDE,
+            axis=[0, sign, 0],
+            range=[0.0, GRIPPER_OPEN_M],
+            damping=5.0,
+            armature=0.05,
         )
         finger.add_geom(
-            type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.01, 0.006, 0.026], pos=[0, sign * 0.007, 0.026],
-            mass=0.02, rgba=[0.2, 0.2, 0.2, 1], friction=[1.5, 0.02, 0.002], condim=4,
-            contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY,
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[0.01, 0.006, 0.026],
+            pos=[0, sign * 0.007, 0.026],
+            mass=0.02,
+            rgba=[0.2, 0.2, 0.2, 1],
+            friction=[1.5, 0.02, 0.002],
+            condim=4,
+            contype=ROBOT_CONTYPE,
+            conaffinity=ROBOT_CONAFFINITY,
         )
     spec.add_equality(  # a stiff coupling keeps the fingers symmetric under grasp loads
-        type=mujoco.mjtEq.mjEQ_JOINT, name1=FINGER_JOINT_NAMES[0], name2=FINGER_JOINT_NAMES[1],
-        data=[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], solref=[0.005, 1.0], solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
+        type=mujoco.mjtEq.mjEQ_JOINT,
+        name1=FINGER_JOINT_NAMES[0],
+        name2=FINGER_JOINT_NAMES[1],
+        data=[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+        solref=[0.005, 1.0],
+        solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
     )
     for i, name in enumerate(JOINT_NAMES):
         kp = JOINT_KP[i]
         spec.add_actuator(
-            name=ACTUATOR_NAMES[i], target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
-            gaintype=mujoco.mjtGain.mjGAIN_FIXED, gainprm=[kp] + [0] * 9,
-            biastype=mujoco.mjtBias.mjBIAS_AFFINE, biasprm=[0, -kp, -0.1 * kp] + [0] * 7,
-            ctrllimited=True, ctrlrange=list(JOINT_LIMITS[i]),
-            forcelimited=True, forcerange=[-JOINT_FORCE_LIMIT_NM[i], JOINT_FORCE_LIMIT_NM[i]],
+            name=ACTUATOR_NAMES[i],
+            target=name,
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+            gainprm=[kp] + [0] * 9,
+            biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+            biasprm=[0, -kp, -0.1 * kp] + [0] * 7,
+            ctrllimited=True,
+            ctrlrange=list(JOINT_LIMITS[i]),
+            forcelimited=True,
+            forcerange=[-JOINT_FORCE_LIMIT_NM[i], JOINT_FORCE_LIMIT_NM[i]],
         )
     spec.add_actuator(
-        name=ACTUATOR_NAMES[-1], target=FINGER_JOINT_NAMES[0], trntype=mujoco.mjtTrn.mjTRN_JOINT,
-        gaintype=mujoco.mjtGain.mjGAIN_FIXED, gainprm=[2000.0] + [0] * 9,
-        biastype=mujoco.mjtBias.mjBIAS_AFFINE, biasprm=[0, -2000.0, -100.0] + [0] * 7,
-        ctrllimited=True, ctrlrange=[0.0, GRIPPER_OPEN_M], forcelimited=True, forcerange=[-70.0, 70.0],
+        name=ACTUATOR_NAMES[-1],
+        target=FINGER_JOINT_NAMES[0],
+        trntype=mujoco.mjtTrn.mjTRN_JOINT,
+        gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+        gainprm=[2000.0] + [0] * 9,
+        biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+        biasprm=[0, -2000.0, -100.0] + [0] * 7,
+        ctrllimited=True,
+        ctrlrange=[0.0, GRIPPER_OPEN_M],
+        forcelimited=True,
+        forcerange=[-70.0, 70.0],
     )

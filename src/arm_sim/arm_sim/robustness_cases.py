@@ -432,6 +432,7 @@ def run_reconstruction_bad_inputs(
                 "reason": case.reason if case.expect == "reject" else "",
             }
         )
+
     def accounted():  # diagnostics follow the meshes of the same frame: wait for the last of them
         keys = ("frames_processed", "frames_rejected", "frames_dropped")
         return sum(probe.diagnostic_number(node, k, 0) for k in keys) >= len(cases)

@@ -16,7 +16,9 @@ def sensor_qos(reliability: str = "best_effort", depth: int = 2) -> QoSProfile:
     if reliability not in ("best_effort", "reliable"):
         raise ValueError(f"reliability must be 'best_effort' or 'reliable', got '{reliability}'")
     qos = QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth, durability=qos_profile_sensor_data.durability,
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        durability=qos_profile_sensor_data.durability,
         reliability=ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE,
     )
     return qos
@@ -25,7 +27,9 @@ def sensor_qos(reliability: str = "best_effort", depth: int = 2) -> QoSProfile:
 def latched_qos(depth: int = 1) -> QoSProfile:
     """Reliable + transient-local: late subscribers still get the last message (meshes, ground truth)."""
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL,
     )
 
@@ -93,7 +97,10 @@ _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|nan|inf", re.IGNORE
 
 def diagnostics_msg(node, name: str, values: dict, level=DiagnosticStatus.OK, message: str = "ok") -> DiagnosticArray:
     status = DiagnosticStatus(
-        level=level, name=f"{node.get_name()}: {name}", message=message, hardware_id=node.get_fully_qualified_name(),
+        level=level,
+        name=f"{node.get_name()}: {name}",
+        message=message,
+        hardware_id=node.get_fully_qualified_name(),
         values=[KeyValue(key=str(k), value=f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in values.items()],
     )
     array = DiagnosticArray(status=[status])

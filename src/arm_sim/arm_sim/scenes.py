@@ -51,7 +51,8 @@ class Scene:
         keep = np.ones(len(self.objects), bool) if keep is None else keep
         objects = [
             PlacedObject(o.model, o.scale, T, o.rgba, o.density_kg_m3)
-            for o, T, k in zip(self.objects, poses, keep, strict=True) if k
+            for o, T, k in zip(self.objects, poses, keep, strict=True)
+            if k
         ]
         return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba)
 
@@ -87,9 +88,15 @@ def settle_scene(scene: Scene, seconds: float = 2.5) -> Scene:
 
 
 def cluttered_scene(
-    pool: ObjectPool, rng: np.random.Generator, n_objects: int | None = None, scale_range=(0.5, 2.0),
-    upright_probability: float = 0.75, drop_std_m: float = 0.1, drop_height_m: float = 0.2,
-    table_height_m: float = 0.0, settle_s: float = 2.5,
+    pool: ObjectPool,
+    rng: np.random.Generator,
+    n_objects: int | None = None,
+    scale_range=(0.5, 2.0),
+    upright_probability: float = 0.75,
+    drop_std_m: float = 0.1,
+    drop_height_m: float = 0.2,
+    table_height_m: float = 0.0,
+    settle_s: float = 2.5,
 ) -> Scene:
     """Objects dropped around a random centre on the table and settled by physics.
 
@@ -129,9 +136,15 @@ def _visible_fraction(scene: Scene, index: int, T_world_camera: np.ndarray) -> f
 
 
 def task_scene(
-    target: ObjectModel, distractor_pool: ObjectPool, rng: np.random.Generator, visible_range=(0.0, 1.01),
-    target_scale: float = 1.0, distractor_scale_range=(0.5, 2.0), extra_distractors=(1, 7),
-    table_height_m: float = 0.0, max_tries: int = 40,
+    target: ObjectModel,
+    distractor_pool: ObjectPool,
+    rng: np.random.Generator,
+    visible_range=(0.0, 1.01),
+    target_scale: float = 1.0,
+    distractor_scale_range=(0.5, 2.0),
+    extra_distractors=(1, 7),
+    table_height_m: float = 0.0,
+    max_tries: int = 40,
 ) -> tuple[Scene, int, np.ndarray]:
     """A manipulation scene: the target upright at a fixed spot, distractors added directly in front
     of it (towards the camera, y ~ N(target y, 0.1 m)) until its visible fraction falls in

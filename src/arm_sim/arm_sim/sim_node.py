@@ -42,14 +42,22 @@ class SimNode(Node):
         fovy = declare(self, "fovy_deg", 45.0, "Vertical field of view, degrees", 10.0, 120.0)
         self.world_frame = declare(self, "world_frame_id", "world", "World frame id")
         self.camera_frame = declare(self, "camera_frame_id", "camera_color_optical_frame", "Optical frame id")
-        reliability = declare(self, "image_reliability", "reliable", "Image QoS reliability",
-                              choices=["reliable", "best_effort"])
+        reliability = declare(
+            self, "image_reliability", "reliable", "Image QoS reliability", choices=["reliable", "best_effort"]
+        )
         if len(eye) != 3 or len(target) != 3 or not np.all(np.isfinite(eye + target)):
             raise ValueError("camera_eye and camera_target must be 3 finite numbers each")
 
         self.session = SimSession(
-            seed=seed, objects=objects or None, split=split, n_objects=n_objects or None,
-            camera_eye=eye, camera_target=target, width=width, height=height, fovy_deg=fovy,
+            seed=seed,
+            objects=objects or None,
+            split=split,
+            n_objects=n_objects or None,
+            camera_eye=eye,
+            camera_target=target,
+            width=width,
+            height=height,
+            fovy_deg=fovy,
             depth_noise=self.depth_noise,
         )
         self.errors = RateLimitedErrors(self.get_logger())
@@ -125,9 +133,17 @@ class SimNode(Node):
         poses = [matrix_to_pose(T) for T in self.session.world.object_poses()]
         self.pub_truth_poses.publish(PoseArray(header=self.header(self.world_frame), poses=poses))
         self.frames_published += 1
-        self.pub_diag.publish(diagnostics_msg(self, "render", {
-            "render_ms": render_ms, "frames_published": self.frames_published, "sim_time_s": self.session.time_s,
-        }))
+        self.pub_diag.publish(
+            diagnostics_msg(
+                self,
+                "render",
+                {
+                    "render_ms": render_ms,
+                    "frames_published": self.frames_published,
+                    "sim_time_s": self.session.time_s,
+                },
+            )
+        )
 
     def publish_ground_truth(self) -> None:
         msg = ReconstructedObjectArray(header=self.header(self.world_frame))

@@ -37,12 +37,19 @@ def build_world(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: 
     world = spec.worldbody
     world.add_light(pos=[0.3, -0.4, table_z + 2.0], dir=[-0.1, 0.2, -1.0], diffuse=[0.6, 0.6, 0.6])
     world.add_geom(
-        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1], pos=[0, 0, table_z - FLOOR_DROP_M],
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[3, 3, 0.1],
+        pos=[0, 0, table_z - FLOOR_DROP_M],
         rgba=[0.45, 0.42, 0.4, 1],
     )
     world.add_geom(
-        name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, 0.025], pos=[0, 0, table_z - 0.025],
-        rgba=list(scene.table_rgba), friction=list(OBJECT_FRICTION),
+        name="table",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[hx, hy, 0.025],
+        pos=[0, 0, table_z - 0.025],
+        rgba=list(scene.table_rgba),
+        friction=list(OBJECT_FRICTION),
     )
     world.add_camera(name=RENDER_CAMERA, pos=[1.0, 0.0, table_z + 1.0], fovy=45.0)
     for i, placed in enumerate(scene.objects):
@@ -60,11 +67,19 @@ def _add_object(spec: mujoco.MjSpec, i: int, placed) -> None:
     body.add_freejoint(name=f"{object_body_name(i)}_joint")
     for j, (vertices, faces) in enumerate(placed.convex_parts_local()):
         mesh_name = f"{object_body_name(i)}_mesh_{j}"
-        spec.add_mesh(name=mesh_name, uservert=np.asarray(vertices, np.float64).reshape(-1).tolist(),
-                      userface=np.asarray(faces, np.int32).reshape(-1).tolist())
+        spec.add_mesh(
+            name=mesh_name,
+            uservert=np.asarray(vertices, np.float64).reshape(-1).tolist(),
+            userface=np.asarray(faces, np.int32).reshape(-1).tolist(),
+        )
         body.add_geom(
-            name=f"{object_body_name(i)}_part_{j}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh_name,
-            density=placed.density_kg_m3, rgba=list(placed.rgba), friction=list(OBJECT_FRICTION), condim=4,
+            name=f"{object_body_name(i)}_part_{j}",
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mesh_name,
+            density=placed.density_kg_m3,
+            rgba=list(placed.rgba),
+            friction=list(OBJECT_FRICTION),
+            condim=4,
         )
 
 
@@ -152,8 +167,12 @@ class SimWorld:
         mujoco.mj_camlight(self.model, self.data)
 
     def render(
-        self, T_world_camera: np.ndarray, noise: DepthNoise | None = None, rng: np.random.Generator | None = None,
-        with_visibility: bool = True, stamp_s: float = 0.0,
+        self,
+        T_world_camera: np.ndarray,
+        noise: DepthNoise | None = None,
+        rng: np.random.Generator | None = None,
+        with_visibility: bool = True,
+        stamp_s: float = 0.0,
     ) -> RgbdFrame:
         """RGB (uint8), depth (float32 m, noisy unless noise.enabled is False), instance labels and
         each object's visible fraction (visible pixels / pixels when rendered alone)."""
@@ -176,8 +195,9 @@ class SimWorld:
         labels = self._geom_label[geom]
         noise = DepthNoise() if noise is None else noise
         depth = apply_depth_noise(depth, self.K, rng if rng is not None else np.random.default_rng(), noise)
-        visible = self.visible_fractions(labels, T_world_camera) if with_visibility else np.full(
-            len(self.object_ids), -1.0)
+        visible = (
+            self.visible_fractions(labels, T_world_camera) if with_visibility else np.full(len(self.object_ids), -1.0)
+        )
         return RgbdFrame(rgb, depth, labels, self.K.copy(), np.array(T_world_camera, float), visible, stamp_s)
 
     def visible_fractions(self, labels: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:

@@ -35,8 +35,10 @@ def test_malformed_images_raise_conversion_errors():
         image_to_numpy(Image(encoding="yuv422", height=2, width=2, step=4, data=bytes(8)))
     with pytest.raises(ConversionError):
         K_from_camera_info(CameraInfo())
-    assert np.allclose(K_from_camera_info(camera_info_from_K(np.array([[500, 0, 320], [0, 500, 240], [0, 0, 1.0]]),
-                                                             640, 480))[0, 0], 500)
+    assert np.allclose(
+        K_from_camera_info(camera_info_from_K(np.array([[500, 0, 320], [0, 500, 240], [0, 0, 1.0]]), 640, 480))[0, 0],
+        500,
+    )
 
 
 def test_poses_and_meshes_round_trip():

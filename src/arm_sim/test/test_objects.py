@@ -12,8 +12,11 @@ def test_procedural_objects_are_watertight_metric_and_rest_on_their_base(categor
     assert np.isclose(np.max(model.mesh.extents), 0.08, atol=1e-6)
     assert abs(model.mesh.bounds[0][2]) < 1e-9  # bottom on z = 0
     assert np.allclose(model.mesh.bounds.mean(0)[:2], 0.0, atol=1e-9)
-    union_of_parts = trimesh.boolean.union(model.convex_parts, engine="manifold") if len(model.convex_parts) > 1 \
+    union_of_parts = (
+        trimesh.boolean.union(model.convex_parts, engine="manifold")
+        if len(model.convex_parts) > 1
         else model.convex_parts[0]
+    )
     assert np.isclose(union_of_parts.volume, model.mesh.volume, rtol=1e-3)
 
 

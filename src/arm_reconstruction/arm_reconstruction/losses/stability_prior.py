@@ -217,9 +217,7 @@ def stability_log_probability(
     ``logits``: ``[B, X, Y, Z]`` network output. ``other_occupancy``: the other objects' occupancy
     (probability or 0/1) in the same grid. ``unobserved_mask``: F4, the only voxels that get a gradient.
     """
-    return StabilityLogProbability.apply(
-        logits, other_occupancy, unobserved_mask, n_directions, sigma_floor_voxels
-    )
+    return StabilityLogProbability.apply(logits, other_occupancy, unobserved_mask, n_directions, sigma_floor_voxels)
 
 
 def stability_loss(logits, other_occupancy, unobserved_mask, n_directions: int = N_DIRECTIONS) -> torch.Tensor:
