@@ -8,10 +8,6 @@ from arm_sim.robustness import Probe, convention_report
 from arm_sim.robustness_cases import run_planner_bad_inputs
 
 FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
-KNOWN_GAPS = {
-    "meshes: 1e6 m box": "plan_node accepts a 1e6 m object: the twin goes unstable (MuJoCo prints 'Nan, Inf or huge "
-    "value in QPOS' for every rollout, unthrottled) and the goal still reports 'task met in the twin'",
-}
 
 
 @pytest.fixture(scope="module")
@@ -39,12 +35,10 @@ def test_stays_alive_answers_every_goal_and_publishes_nothing_wrong(run):
     assert report["action_server_ready"]
     assert report["alive"] and not report["tracebacks"], report["tracebacks"]
     assert report["invalid_outputs"] == []
-    unexpected = [c for c in report["cases"] if not c["ok"] and c["name"] not in KNOWN_GAPS]
-    assert unexpected == []
 
 
-@pytest.mark.xfail(strict=False, reason=KNOWN_GAPS["meshes: 1e6 m box"])
-def test_physically_absurd_objects_are_refused(run):
+def test_every_case_is_handled_as_expected(run):
+    """Including a 1e6 m box: left out of the twin (max_object_size_m), so its goal is refused."""
     assert [c["name"] for c in run["report"]["cases"] if not c["ok"]] == []
 
 

@@ -19,11 +19,26 @@ TASK_NAMES = {
 }
 
 
-def twin_objects_from_msg(msg) -> tuple[list[TwinObject], float, dict[int, str]]:
+DEFAULT_MAX_OBJECT_SIZE_M = 1.0
+
+
+def object_size_m(mesh: trimesh.Trimesh | None, parts: list[trimesh.Trimesh]) -> float:
+    """Largest side of the axis-aligned box around an object's mesh and parts, m (object frame)."""
+    vertices = [m.vertices for m in ([mesh] if mesh is not None else []) + parts if len(m.vertices)]
+    if not vertices:
+        return 0.0
+    stacked = np.concatenate(vertices)
+    return float(np.max(stacked.max(axis=0) - stacked.min(axis=0)))
+
+
+def twin_objects_from_msg(
+    msg, max_object_size_m: float = DEFAULT_MAX_OBJECT_SIZE_M
+) -> tuple[list[TwinObject], float, dict[int, str]]:
     """ReconstructedObjectArray -> (objects, table height m, {id: why it was dropped}).
 
-    Malformed objects (bad mesh indices, non-finite poses) are dropped with a reason instead of
-    failing the whole array; an object whose parts are empty keeps its mesh for the twin to decompose.
+    Malformed objects (bad mesh indices, non-finite poses, larger than `max_object_size_m`) are dropped
+    with a reason instead of failing the whole array; an object whose parts are empty keeps its mesh
+    for the twin to decompose.
     """
     table_height_m = float(msg.table_height_m)
     if not np.isfinite(table_height_m):
@@ -47,6 +62,10 @@ def twin_objects_from_msg(msg) -> tuple[list[TwinObject], float, dict[int, str]]
             continue
         if mesh is None and not parts:
             dropped[object_id] = "empty mesh and no convex parts"
+            continue
+        size_m = object_size_m(mesh, parts)
+        if size_m > max_object_size_m:
+            dropped[object_id] = f"{size_m:.3g} m across, larger than max_object_size_m = {max_object_size_m} m"
             continue
         objects.append(TwinObject(object_id, T, mesh, parts, float(obj.visible_fraction), obj.method))
     return objects, table_height_m, dropped

@@ -69,6 +69,9 @@ class PlanNode(Node):
         self.joint_state_timeout_s = declare(
             self, "joint_state_timeout_s", 2.0, "Refuse goals when joint states are older than this, s", 0.0, 3600.0
         )
+        self.max_object_size_m = declare(
+            self, "max_object_size_m", 1.0, "Leave objects larger than this out of the twin, m", 0.01, 100.0
+        )
         self.session = ManipulationSession(config, timestep)
         self.finger_joint = self.session.robot.trajectory_joint_names[-1]
         self.errors = RateLimitedErrors(self.get_logger())
@@ -107,7 +110,7 @@ class PlanNode(Node):
     # --- inputs ------------------------------------------------------------------------------
     def on_meshes(self, msg: ReconstructedObjectArray) -> None:
         try:
-            objects, table_height_m, dropped = twin_objects_from_msg(msg)
+            objects, table_height_m, dropped = twin_objects_from_msg(msg, self.max_object_size_m)
         except ConversionError as error:
             self.meshes_rejected += 1
             self.errors.error("meshes", f"ignoring malformed /arm/meshes: {error}")

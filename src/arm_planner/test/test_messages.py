@@ -31,6 +31,20 @@ def test_objects_from_message_keep_good_ones_and_explain_bad_ones():
     assert set(dropped) == {2, 3}
 
 
+def test_objects_larger_than_the_limit_are_dropped_with_their_size():
+    import trimesh
+
+    huge = trimesh.creation.box(extents=(1e6, 1e6, 1e6))
+    msg = ReconstructedObjectArray(table_height_m=0.0)
+    msg.objects = [
+        ReconstructedObject(id=1, pose=matrix_to_pose(np.eye(4)), mesh=_box_msg()),
+        ReconstructedObject(id=2, pose=matrix_to_pose(np.eye(4)), mesh=mesh_to_msg(huge.vertices, huge.faces)),
+    ]
+    objects, _, dropped = twin_objects_from_msg(msg, max_object_size_m=1.0)
+    assert [o.id for o in objects] == [1]
+    assert "larger than max_object_size_m" in dropped[2]
+
+
 def test_trajectory_message_times_and_positions():
     msg = trajectory_msg(["a", "b"], np.array([0.02, 1.5]), np.array([[0.0, 1.0], [2.0, 3.0]]))
     assert msg.joint_names == ["a", "b"]

@@ -2,7 +2,8 @@
 
 Frames are reconstructed by one worker thread that always takes the newest frame; a frame that
 arrives while another waits replaces it (counted as dropped). Malformed frames are logged
-(rate-limited) and nothing is published for them.
+(rate-limited) and nothing is published for them. Diagnostics (per-stage latency, frame counts)
+follow every frame and a 1 s timer.
 """
 
 import threading
@@ -95,6 +96,9 @@ class ReconstructionNode(Node):
         self._latest: SegmentedFrame | None = None
         self._wake = threading.Condition()
         self._stop = False
+        self._stage_values: dict = {}
+        self._status = (DiagnosticStatus.OK, "waiting for frames")
+        self.create_timer(1.0, self.publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
         self._worker.start()
         self.get_logger().info(
@@ -120,24 +124,35 @@ class ReconstructionNode(Node):
                 msg, self._latest = self._latest, None
             self.process(msg)
 
+    def _publish(self, publisher, msg) -> bool:
+        """Publish unless shutting down; a publish that SIGINT/SIGTERM invalidated is dropped quietly."""
+        if self._stop or not self.context.ok():
+            return False
+        try:
+            publisher.publish(msg)
+        except Exception:
+            if self.context.ok() and not self._stop:
+                raise
+            return False
+        return True
+
     def process(self, msg: SegmentedFrame) -> None:
         started = time.perf_counter()
         try:
             frame = frame_from_msg(msg)
             objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
         except (ConversionError, GridInputError) as error:
-            self.rejected += 1
-            self.errors.error(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
+            self._reject(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
             return
         except Exception as error:  # a failure inside one frame must not kill the node
-            self.rejected += 1
-            self.errors.error("reconstruction", f"reconstruction failed: {type(error).__name__}: {error}")
+            self._reject("reconstruction", f"reconstruction failed: {type(error).__name__}: {error}")
             return
         header = msg.header
         header.frame_id = frame.world_frame_id or "world"
-        default_table = self.reconstructor.settings.table_height_m or 0.0
-        self.pub_objects.publish(objects_to_msg(objects, header, main_table_height(objects, default_table)))
-        self.pub_markers.publish(markers_msg(objects, header, self.marker_alpha))
+        table_height_m = main_table_height(objects, self.reconstructor.settings.table_height_m or 0.0)
+        if not self._publish(self.pub_objects, objects_to_msg(objects, header, table_height_m)):
+            return
+        self._publish(self.pub_markers, markers_msg(objects, header, self.marker_alpha))
         self.processed += 1
         failed = [o for o in objects if not o.ok]
         for obj in failed:
@@ -147,14 +162,31 @@ class ReconstructionNode(Node):
             frame_to_meshes_ms=1000.0 * (time.perf_counter() - started),
             objects=len(objects) - len(failed),
             failed_objects=len(failed),
-            frames_received=self.received,
-            frames_processed=self.processed,
-            frames_dropped=self.dropped,
-            frames_rejected=self.rejected,
         )
         level = DiagnosticStatus.WARN if failed else DiagnosticStatus.OK
-        message = f"{len(failed)} object(s) not reconstructed" if failed else "ok"
-        self.pub_diag.publish(diagnostics_msg(self, "reconstruction", values, level, message))
+        self._update_diagnostics(values, level, f"{len(failed)} object(s) not reconstructed" if failed else "ok")
+
+    def _reject(self, cause: str, message: str) -> None:
+        self.rejected += 1
+        self.errors.error(cause, message)
+        self._update_diagnostics({}, DiagnosticStatus.WARN, message[:200])
+
+    def _update_diagnostics(self, values: dict, level, message: str) -> None:
+        self._stage_values.update(values)
+        self._status = (level, message)
+        self.publish_diagnostics()
+
+    def publish_diagnostics(self) -> None:
+        """Per-stage latency of the last frame and the frame counts (also on a 1 s timer)."""
+        values = {
+            **self._stage_values,
+            "frames_received": self.received,
+            "frames_processed": self.processed,
+            "frames_dropped": self.dropped,
+            "frames_rejected": self.rejected,
+        }
+        level, message = self._status
+        self._publish(self.pub_diag, diagnostics_msg(self, "reconstruction", values, level, message))
 
     def close(self) -> None:
         with self._wake:
