@@ -264,13 +264,15 @@ class PlanNode(Node):
     # --- diagnostics -------------------------------------------------------------------------
     def publish_diagnostics(self) -> None:
         with self._lock:
-            objects = len(self._objects[0]) if self._objects else 0
+            ids = sorted(o.id for o in self._objects[0]) if self._objects else []
             busy = self._busy
+        objects = len(ids)
         values = {
             "goals": self.goals,
             "refusals": self.refusals,
             "busy": busy,
             "twin_objects": objects,
+            "twin_object_ids": " ".join(map(str, ids)),
             "twin_builds": self.session.twin_builds,
             "meshes_received": self.meshes_received,
             "meshes_rejected": self.meshes_rejected,

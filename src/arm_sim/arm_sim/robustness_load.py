@@ -189,7 +189,6 @@ def run_fault(
 
     from arm_interfaces.action import Manipulate
 
-    last = watch.last_meshes()
     planner_objects_before = probe.diagnostic_number("plan_node", "twin_objects", 0)
     frames_before = watch.totals()["segmentation"]
     graph["reconstruction"].kill9()
@@ -201,13 +200,16 @@ def run_fault(
     segmentation_kept_running = watch.totals()["segmentation"] > frames_before
 
     goal_result = {"sent": False}
-    if last is not None and len(last.objects):
+    # the planner's own objects: a message in flight at the kill may have replaced the scene, and the
+    # planner leaves implausible objects (max_object_size_m) out of its twin
+    planner_ids = [int(i) for i in probe.diagnostic("plan_node").get("twin_object_ids", "").split()]
+    if planner_ids:
         action = ActionClient(probe.node, Manipulate, "arm/manipulate")
         if action.wait_for_server(timeout_sec=30.0):
-            goal = Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=int(last.objects[0].id))
+            goal = Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=planner_ids[0])
             handle_future = probe.in_executor(lambda: action.send_goal_async(goal))
             probe.wait_until(handle_future.done, 30.0)
-            goal_result = {"sent": True, "target_id": int(last.objects[0].id)}
+            goal_result = {"sent": True, "target_id": planner_ids[0]}
             if handle_future.done() and handle_future.result().accepted:
                 result_future = probe.in_executor(handle_future.result().get_result_async)
                 probe.wait_until(result_future.done, goal_timeout_s)
