@@ -55,7 +55,7 @@ class TrainConfig:
     lr: float = 2e-4
     pos_weight: float = 1.0
     surface_weight: float = 1.0
-    stability_weight: float = 1e-3
+    stability_weight: float = 1e-5  # per voxel ~32768x this against the mean cross-entropy (model cards)
     connectivity_weight: float = 1e-4  # 1e-2 diverged here: its detour term inflated the shapes
     connectivity_factor: int = 2
     connectivity_endpoints: int = 16
