@@ -4,8 +4,10 @@
    crease between their surface normals (where touching or stacked objects meet) or a sharp change
    of chromaticity; connected components of the rest are fragments.
 2. Merging: adjacent fragments whose shared boundary is depth-continuous and whose mean
-   chromaticities agree are one object (parts of one object meet at creases too); fragments too
-   small to be an object join the neighbour they touch most.
+   chromaticities agree are one object (parts of one object meet at creases too). Regions merge
+   most similar first (mutual nearest neighbours per round, means and contacts recomputed after
+   each round), so a chain of small colour steps does not join objects of different colour.
+   Fragments too small to be an object join the neighbour they touch most.
 3. Growing: instances extend into nearby pixels the depth sensor dropped or that lie in the table
    band (object bottoms, thin feet) when the pixel's colour matches the instance and not the table.
 """
@@ -38,9 +40,11 @@ class ClusterParams:
     min_instance_area_m2: float = 3e-4
     flood_iterations: int = 20
     flood_chroma_threshold: float = 0.6
+    flood_strict_chroma_threshold: float = 0.25  # first flood pass: fragments claim their own colour (0: off)
     grow_radius_px: int = 3
     grow_chroma_threshold: float = 0.12
     max_instances: int = 255
+    agglomerative: bool = True  # region merging most similar first (False: one pass over all pairs)
 
 
 def chromaticity(rgb: np.ndarray, blur: int = 3) -> np.ndarray:
@@ -185,19 +189,63 @@ def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
     return ((continuous >= params.min_contact_px) & (continuous >= broken)) | across_gap
 
 
+def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64) -> np.ndarray:
+    """Region merging: each round joins the mutually most similar mergeable neighbours, then the
+    merged regions' mean colours and contact counts are recomputed, so a chain of small colour
+    steps does not join two objects of different colour. Returns the region of each label 0..n."""
+    flat = labels.ravel()
+    frag_size = np.bincount(flat, minlength=n + 1).astype(np.float64)
+    frag_sums = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
+    owner = np.arange(n + 1)
+    big = np.int64(n + 1)
+    for _ in range(max_rounds):
+        a, b = owner[pairs[:, 0]], owner[pairs[:, 1]]
+        keep = a != b
+        if not np.any(keep):
+            break
+        keys, inverse = np.unique(np.minimum(a, b)[keep] * big + np.maximum(a, b)[keep], return_inverse=True)
+        region_pairs = np.stack([keys // big, keys % big], axis=1)
+        region_counts = np.stack(
+            [np.bincount(inverse, weights=counts[keep, k], minlength=len(keys)) for k in range(3)], 1
+        )
+        size = np.bincount(owner, weights=frag_size, minlength=n + 1)
+        means = np.stack([np.bincount(owner, weights=frag_sums[:, k], minlength=n + 1) for k in range(3)], 1)
+        means /= np.maximum(size, 1.0)[:, None]
+        ra, rb = region_pairs[:, 0], region_pairs[:, 1]
+        distance = np.abs(means[ra] - means[rb]).sum(axis=1)
+        small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
+        limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
+        ok = _should_merge(region_counts, params) & (distance <= limit)
+        if not np.any(ok):
+            break
+        best = np.full(n + 1, np.inf)
+        np.minimum.at(best, ra[ok], distance[ok])
+        np.minimum.at(best, rb[ok], distance[ok])
+        mutual = ok & (distance <= best[ra]) & (distance <= best[rb])
+        component = _union(n, region_pairs[mutual])
+        representative = np.full(component.max() + 1, n + 1)
+        np.minimum.at(representative, component, np.arange(n + 1))
+        owner = representative[component[owner]]
+    return owner
+
+
 def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams) -> np.ndarray:
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none)."""
     if n == 0:
         return labels
     pairs, counts = fragment_contacts(labels, depth_m, params)
     if len(pairs) and params.use_colour:
-        means = _region_means(labels, n, chroma)
-        colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
-        sizes = np.bincount(labels.ravel(), minlength=n + 1)
-        small = np.minimum(sizes[pairs[:, 0]], sizes[pairs[:, 1]]) < params.small_fragment_px
-        limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
-        merge = _should_merge(counts, params) & (colour_distance <= limit)
-        labels = _compact(_union(n, pairs[merge])[labels], 0)
+        if params.agglomerative:
+            component = _agglomerate(labels, n, pairs, counts, chroma, params)
+        else:
+            means = _region_means(labels, n, chroma)
+            colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
+            sizes = np.bincount(labels.ravel(), minlength=n + 1)
+            small = np.minimum(sizes[pairs[:, 0]], sizes[pairs[:, 1]]) < params.small_fragment_px
+            limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
+            merge = _should_merge(counts, params) & (colour_distance <= limit)
+            component = _union(n, pairs[merge])
+        labels = _compact(component[labels], 0)
         pairs, counts = fragment_contacts(labels, depth_m, params)
     n = int(labels.max())
     area = np.bincount(labels.ravel(), weights=area_m2.ravel(), minlength=n + 1)
@@ -277,6 +325,8 @@ def cluster_instances(
     keep = sizes >= params.min_fragment_px
     keep[0] = False
     fragments = _compact(np.where(keep[fragments], fragments, 0), 0)
+    if params.flood_strict_chroma_threshold > 0:
+        fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_strict_chroma_threshold)
     fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_chroma_threshold)
     leftover, n_left = ndimage.label(mask & (fragments == 0))
     if n_left:

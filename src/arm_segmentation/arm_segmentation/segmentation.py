@@ -3,7 +3,7 @@
 `segment(rgb, depth_m, K, T_world_camera)` needs no learned weights and runs on the CPU.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -17,6 +17,7 @@ from arm_segmentation.geometry import (
     transform_points,
     validate_frame,
 )
+from arm_segmentation.occluders import OccluderParams, near_occluders
 from arm_segmentation.refine import RefineParams, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
     SupportLevel,
@@ -24,9 +25,35 @@ from arm_segmentation.table_plane import (
     band_for_depth,
     classify_heights,
     estimate_support_levels,
+    extend_towards,
     pixel_area_m2,
     support_heights,
 )
+
+
+@dataclass(frozen=True)
+class FineParams:
+    """Full-resolution clustering on a crop around the objects (pixel sizes at full resolution).
+
+    The pixel-based clustering parameters replace those of SegmentationParams.cluster there.
+    """
+
+    max_pixels: int = 150_000  # larger crops are clustered on the working grid
+    margin_px: int = 12
+    candidate_radius_px: int = 4
+    table_colour_window_px: int = 31
+    step_px: int = 3
+    contact_radius_px: int = 3
+    small_fragment_px: int = 200
+    min_contact_px: int = 6
+    min_fragment_px: int = 6
+    flood_iterations: int = 24
+    grow_radius_px: int = 3
+
+    def cluster_params(self, cluster: ClusterParams) -> ClusterParams:
+        names = ("step_px", "contact_radius_px", "small_fragment_px", "min_contact_px", "min_fragment_px")
+        names += ("flood_iterations", "grow_radius_px")
+        return replace(cluster, **{name: getattr(self, name) for name in names})
 
 
 @dataclass(frozen=True)
@@ -43,9 +70,12 @@ class SegmentationParams:
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
     table_colour_window_px: int = 15
+    extend_table_to_camera: bool = True  # the largest level's footprint reaches under the camera
     table: TableParams = field(default_factory=TableParams)
     cluster: ClusterParams = field(default_factory=ClusterParams)
     refine: RefineParams = field(default_factory=RefineParams)
+    fine: FineParams = field(default_factory=FineParams)
+    occluders: OccluderParams = field(default_factory=OccluderParams)
 
 
 @dataclass
@@ -68,8 +98,93 @@ def local_table_chroma(chroma: np.ndarray, table: np.ndarray, window_px: int) ->
     return np.where(count[..., None] > 0.5, total / np.maximum(count, 1.0)[..., None], fallback).astype(np.float32)
 
 
+@dataclass
+class _Stage:
+    """Everything computed on one grid (the working grid, or a full-resolution crop of it)."""
+
+    smoothed: np.ndarray
+    points_camera: np.ndarray
+    normals_camera: np.ndarray
+    valid: np.ndarray
+    points_world: np.ndarray
+    area: np.ndarray
+    support: np.ndarray
+    table: np.ndarray
+    objects: np.ndarray
+    levels: list[SupportLevel]
+    chroma: np.ndarray | None = None
+    candidates: np.ndarray | None = None
+    table_chroma: np.ndarray | None = None
+
+
+def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, support=None) -> _Stage:
+    """Points, normals, support levels (estimated unless given), support heights (computed unless
+    given), table and object masks."""
+    smoothed = preprocess_depth(depth, params.fill_radius_px, params.smooth_sigma_m)
+    points_camera = backproject(smoothed, K)
+    normals_camera = organized_normals(points_camera, step_px)
+    valid = normals_camera[..., 2] != 0
+    points_world = transform_points(points_camera, T)
+    area = pixel_area_m2(points_camera, normals_camera, K)
+    area[~valid] = 0.0
+    if levels is None:
+        normals_world = normals_camera @ T[:3, :3].T.astype(np.float32)
+        levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
+        if levels and params.extend_table_to_camera:
+            levels[0] = extend_towards(levels[0], T[:2, 3])
+    if support is None:
+        support = support_heights(points_world, smoothed, levels, params.table)
+    table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
+    if np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any():
+        lo = np.asarray(params.workspace_min_m, dtype=np.float32)
+        hi = np.asarray(params.workspace_max_m, dtype=np.float32)
+        objects &= np.all((points_world >= lo) & (points_world <= hi), axis=-1)
+    return _Stage(smoothed, points_camera, normals_camera, valid, points_world, area, support, table, objects, levels)
+
+
+def _colour(stage: _Stage, rgb, params: SegmentationParams, window_px: int, radius_px: int) -> _Stage:
+    """Adds chromaticity, the local table colour and the candidate mask (pixels without depth or
+    in the table band near objects whose colour is not the table's)."""
+    stage.chroma = chromaticity(rgb)
+    stage.candidates = np.zeros_like(stage.objects)
+    if np.any(stage.table) and np.any(stage.objects):
+        stage.table_chroma = local_table_chroma(stage.chroma, stage.table, window_px)
+        not_table_colour = hue_distance(stage.chroma, stage.table_chroma) > params.table_colour_threshold
+        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
+        near_objects = cv2.dilate(stage.objects.astype(np.uint8), disk) > 0
+        stage.candidates = near_objects & not_table_colour & (stage.table | (stage.smoothed <= 0))
+    return stage
+
+
+def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams) -> np.ndarray:
+    labels = cluster_instances(
+        stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
+        stage.valid, stage.area, stage.table_chroma, cluster,
+    )  # fmt: skip
+    return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
+
+
+def fine_crop(objects: np.ndarray, stride: int, shape: tuple[int, int], fine: FineParams):
+    """Full-resolution (rows, cols) slices around the working-grid object pixels, or None when
+    there are none or the crop would exceed fine.max_pixels."""
+    ys, xs = np.nonzero(objects)
+    if len(ys) == 0:
+        return None
+    m = fine.margin_px
+    y0, x0 = max(int(ys.min()) * stride - m, 0), max(int(xs.min()) * stride - m, 0)
+    y1, x1 = min((int(ys.max()) + 1) * stride + m, shape[0]), min((int(xs.max()) + 1) * stride + m, shape[1])
+    if (y1 - y0) * (x1 - x0) > fine.max_pixels:
+        return None
+    return slice(y0, y1), slice(x0, x1)
+
+
 def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None):
     """Segment one frame; also returns the table mask and the support levels found.
+
+    Support levels are always estimated on the working grid. When the objects fit in a crop of at
+    most params.fine.max_pixels full-resolution pixels, they are clustered on that crop at full
+    resolution (small, distant objects keep their depth edges); otherwise on the working grid,
+    refined to full resolution afterwards.
 
     Raises geometry.InputError for frames that cannot be interpreted (shapes, intrinsics, pose).
     A frame without a visible table gives an all-zero label image.
@@ -82,41 +197,39 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         rgb, depth = rgb_full[::stride, ::stride], depth_full[::stride, ::stride]
         K = K_full.copy()
         K[:2] /= stride
-    smoothed = preprocess_depth(depth, params.fill_radius_px, params.smooth_sigma_m)
-    points_camera = backproject(smoothed, K)
-    normals_camera = organized_normals(points_camera, params.cluster.step_px)
-    valid = normals_camera[..., 2] != 0
-    points_world = transform_points(points_camera, T)
-    normals_world = normals_camera @ T[:3, :3].T.astype(np.float32)
-    area = pixel_area_m2(points_camera, normals_camera, K)
-    area[~valid] = 0.0
-    levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
-    support = support_heights(points_world, smoothed, levels, params.table)
-    table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
-    if np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any():
-        lo = np.asarray(params.workspace_min_m, dtype=np.float32)
-        hi = np.asarray(params.workspace_max_m, dtype=np.float32)
-        objects &= np.all((points_world >= lo) & (points_world <= hi), axis=-1)
-    chroma = chromaticity(rgb)
-    candidates = np.zeros_like(objects)
-    table_chroma = None
-    if np.any(table) and np.any(objects):
-        table_chroma = local_table_chroma(chroma, table, params.table_colour_window_px)
-        not_table_colour = hue_distance(chroma, table_chroma) > params.table_colour_threshold
-        radius = params.candidate_radius_px
-        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-        near_objects = cv2.dilate(objects.astype(np.uint8), disk) > 0
-        candidates = near_objects & not_table_colour & (table | (smoothed <= 0))
-    labels = cluster_instances(
-        points_camera, normals_camera, smoothed, chroma, objects, candidates, valid, area, table_chroma, params.cluster
-    )
-    labels = drop_support_structure(labels, points_world, smoothed, support, levels, params.table)
-    if stride > 1:
-        labels = refine_full_resolution(
-            labels, chroma, support, table_chroma, stride, rgb_full, depth_full, K_full, T, params.table, params.refine
-        )
-        table = upsample(table, stride, depth_full.shape)
-    return SegmentationResult(labels=labels, table_mask=table, levels=levels)
+    stage = _geometry(depth, K, T, params, params.cluster.step_px, None)
+    crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
+    if crop is not None:
+        K_crop = K_full.copy()
+        K_crop[0, 2] -= crop[1].start
+        K_crop[1, 2] -= crop[0].start
+        cluster = params.fine.cluster_params(params.cluster)
+        y0, x0 = crop[0].start, crop[1].start
+        support = upsample(stage.support[y0 // stride :, x0 // stride :], stride, depth_full.shape)
+        support = support[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
+        fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
+        _colour(fine, rgb_full[crop], params, params.fine.table_colour_window_px, params.fine.candidate_radius_px)
+        labels = np.zeros(depth_full.shape, dtype=np.uint16)
+        labels[crop] = _cluster(fine, cluster, params)
+        table = upsample(stage.table, stride, depth_full.shape)
+        table[crop] = fine.table
+    else:
+        _colour(stage, rgb, params, params.table_colour_window_px, params.candidate_radius_px)
+        labels = _cluster(stage, params.cluster, params)
+        table = stage.table
+        if stride > 1:
+            labels = refine_full_resolution(
+                labels, stage.chroma, stage.support, stage.table_chroma, stride, rgb_full, depth_full, K_full, T,
+                params.table, params.refine,
+            )  # fmt: skip
+            table = upsample(table, stride, depth_full.shape)
+    taken = labels[::stride, ::stride] > 0
+    occluders = near_occluders(taken, stage.smoothed, rgb, stage.table, K, T, stage.levels, params.occluders)
+    if np.any(occluders):
+        occluders = upsample(occluders, stride, depth_full.shape)
+        add = (labels == 0) & (occluders > 0)
+        labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
+    return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 
 def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:

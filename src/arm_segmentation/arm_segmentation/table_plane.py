@@ -108,6 +108,18 @@ def estimate_support_levels(
     return levels
 
 
+def extend_towards(level: SupportLevel, xy) -> SupportLevel:
+    """The level with its footprint grown to the convex hull of the footprint and the point xy.
+
+    Seen from a camera at xy, the part of the table nearest to it is often hidden by the objects
+    standing there or cut off by the image border; they still stand on it.
+    """
+    hull = _hull(np.vstack([level.hull_xy, np.asarray(xy, dtype=np.float64).reshape(1, 2)]))
+    if hull is None:
+        return level
+    return SupportLevel(level.height_m, level.area_m2, hull[0], hull[1])
+
+
 def support_heights(
     points_world: np.ndarray,
     depth_m: np.ndarray,
