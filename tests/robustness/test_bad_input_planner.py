@@ -1,6 +1,11 @@
 """plan_node under degenerate meshes, unknown targets and tasks, bad joint states and goals, over DDS."""
 
 import pytest
+from node_conventions import (  # noqa: F401  collected here
+    test_bad_parameter_values_are_rejected_at_run_time,
+    test_clean_shutdown_on_sigint,
+    test_parameters_are_declared_with_descriptors_and_ranges,
+)
 from rclpy.qos import DurabilityPolicy
 from robustness_nodes import start
 
@@ -55,14 +60,3 @@ def test_refusals_are_logged_and_rate_limited(run):
 def test_meshes_subscription_is_transient_local(run):
     ours = [s for s in run["subscriptions"] if s.node_name == "plan_node"]
     assert ours and ours[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-
-
-def test_parameters_are_declared_with_descriptors_and_ranges(run):
-    c = run["conventions"]
-    assert c["without_description"] == [] and c["numeric_without_range"] == []
-    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
-    assert c["bad_values_accepted_at_run_time"] == []
-
-
-def test_clean_shutdown_on_sigint(run):
-    assert run["exit_code"] == 0, run["log"][-2000:]

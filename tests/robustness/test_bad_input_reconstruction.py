@@ -1,6 +1,11 @@
 """reconstruction_node under malformed and extreme segmented frames, over DDS."""
 
 import pytest
+from node_conventions import (  # noqa: F401  collected here
+    test_bad_parameter_values_are_rejected_at_run_time,
+    test_clean_shutdown_on_sigint,
+    test_parameters_are_declared_with_descriptors_and_ranges,
+)
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from robustness_nodes import reconstruction_params, start
 
@@ -58,17 +63,3 @@ def test_meshes_are_reliable_and_transient_local(run):
     ours = [p for p in run["publishers"] if p.node_name == "reconstruction_node"]
     assert ours and ours[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
     assert ours[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-
-
-def test_parameters_are_declared_with_descriptors_and_ranges(run):
-    c = run["conventions"]
-    assert c["without_description"] == [] and c["numeric_without_range"] == []
-    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
-
-
-def test_bad_parameter_values_are_rejected_at_run_time(run):
-    assert run["conventions"]["bad_values_accepted_at_run_time"] == []
-
-
-def test_clean_shutdown_on_sigint(run):
-    assert run["exit_code"] == 0, run["log"][-2000:]

@@ -1,6 +1,11 @@
 """segmentation_node under malformed and extreme camera input, over DDS, with remapped topics."""
 
 import pytest
+from node_conventions import (  # noqa: F401  collected here
+    test_bad_parameter_values_are_rejected_at_run_time,
+    test_clean_shutdown_on_sigint,
+    test_parameters_are_declared_with_descriptors_and_ranges,
+)
 from rclpy.qos import ReliabilityPolicy
 from robustness_nodes import start
 
@@ -55,17 +60,3 @@ def test_image_qos_reliability_is_the_parameter(run):
     ours = [s for s in run["subscriptions"] if s.node_name == "segmentation_node"]
     assert ours, "no subscription on the remapped rgb topic"
     assert ours[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
-
-
-def test_parameters_are_declared_with_descriptors_and_ranges(run):
-    c = run["conventions"]
-    assert c["without_description"] == [] and c["numeric_without_range"] == []
-    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
-
-
-def test_bad_parameter_values_are_rejected_at_run_time(run):
-    assert run["conventions"]["bad_values_accepted_at_run_time"] == []
-
-
-def test_clean_shutdown_on_sigint(run):
-    assert run["exit_code"] == 0, run["log"][-2000:]

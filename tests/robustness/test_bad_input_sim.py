@@ -1,6 +1,11 @@
 """sim_node under malformed joint trajectories, over DDS: it stays alive and its joint states stay valid."""
 
 import pytest
+from node_conventions import (  # noqa: F401  collected here
+    test_bad_parameter_values_are_rejected_at_run_time,
+    test_clean_shutdown_on_sigint,
+    test_parameters_are_declared_with_descriptors_and_ranges,
+)
 from robustness_nodes import start
 
 from arm_sim.robustness import Probe, convention_report
@@ -33,17 +38,3 @@ def test_rejections_are_logged_and_rate_limited(run):
     assert run["report"]["error_lines"] >= 1
     assert run["report"]["rate_limit_violations"] == []
     assert run["report"]["reasons_not_logged"] == []
-
-
-def test_parameters_are_declared_with_descriptors_and_ranges(run):
-    c = run["conventions"]
-    assert c["without_description"] == [] and c["numeric_without_range"] == []
-    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
-
-
-def test_bad_parameter_values_are_rejected_at_run_time(run):
-    assert run["conventions"]["bad_values_accepted_at_run_time"] == []
-
-
-def test_clean_shutdown_on_sigint(run):
-    assert run["exit_code"] == 0, run["log"][-2000:]

@@ -87,27 +87,15 @@ def test_arguments_are_validated():
 @pytest.fixture(scope="module")
 def baseline_only_checkpoints(tmp_path_factory):
     """A baseline checkpoint from two steps of the project trainer; no ARM checkpoints."""
-    from test_dataset import write_box_dataset
+    from test_dataset import tiny_train_config, write_box_dataset
 
-    from arm_reconstruction.train import TrainConfig, train
+    from arm_reconstruction.train import train
 
     root = tmp_path_factory.mktemp("recon_data")
     write_box_dataset(root, "train", shards=1, per_shard=8, seed=0)
     write_box_dataset(root, "test", shards=1, per_shard=4, seed=1)
     folder = tmp_path_factory.mktemp("checkpoints")
-    config = TrainConfig(
-        variant="baseline",
-        data=str(root),
-        out=str(folder / "baseline.pt"),
-        steps=2,
-        batch_size=4,
-        base_channels=8,
-        device="cpu",
-        checkpoint_every=1,
-        eval_every=2,
-        eval_samples=4,
-    )
-    train(config, progress=False)
+    train(tiny_train_config(root, folder / "baseline.pt", "baseline", steps=2), progress=False)
     return folder
 
 

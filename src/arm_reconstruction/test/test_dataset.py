@@ -40,6 +40,26 @@ def box_samples(n: int, resolution: int, rng: np.random.Generator) -> dict:
     return columns
 
 
+def tiny_train_config(data_root, out_path, variant="arm", steps=3, **overrides):
+    """A TrainConfig for a few CPU steps of a small network on a box dataset (tests only)."""
+    from arm_reconstruction.train import TrainConfig
+
+    values = dict(
+        variant=variant,
+        data=str(data_root),
+        out=str(out_path),
+        steps=steps,
+        batch_size=4,
+        base_channels=8,
+        device="cpu",
+        checkpoint_every=1,
+        eval_every=2,
+        eval_samples=4,
+    )
+    values.update(overrides)
+    return TrainConfig(**values)
+
+
 def write_box_dataset(root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0):
     for shard_seed in range(shards):
         rng = np.random.default_rng([seed, shard_seed])

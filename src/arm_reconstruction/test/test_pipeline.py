@@ -134,25 +134,13 @@ def test_one_call_api(sim, checkpoints):
 
 @pytest.mark.slow
 def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path):
-    from test_dataset import write_box_dataset
+    from test_dataset import tiny_train_config, write_box_dataset
 
-    from arm_reconstruction.train import TrainConfig, train
+    from arm_reconstruction.train import train
 
     write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0)
     write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1)
-    config = TrainConfig(
-        variant="arm",
-        data=str(tmp_path),
-        out=str(tmp_path / "arm.pt"),
-        steps=2,
-        batch_size=4,
-        base_channels=8,
-        device="cpu",
-        checkpoint_every=1,
-        eval_every=2,
-        eval_samples=4,
-    )
-    train(config, progress=False)
+    train(tiny_train_config(tmp_path, tmp_path / "arm.pt", "arm", steps=2), progress=False)
     _, frame = sim
     reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt")))
     assert reconstructor.resolution == 16 and reconstructor.checkpoint_config["base_channels"] == 8

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from test_dataset import write_box_dataset
+from test_dataset import tiny_train_config, write_box_dataset
 
 from arm_reconstruction.checkpoint import load_checkpoint, read_checkpoint
 from arm_reconstruction.model_cards import write_model_card
@@ -17,20 +17,7 @@ def box_data(tmp_path_factory):
 
 
 def _config(root, tmp_path, variant="arm", steps=3, **overrides):
-    values = dict(
-        variant=variant,
-        data=str(root),
-        out=str(tmp_path / f"{variant}.pt"),
-        steps=steps,
-        batch_size=4,
-        base_channels=8,
-        device="cpu",
-        checkpoint_every=1,
-        eval_every=2,
-        eval_samples=4,
-    )
-    values.update(overrides)
-    return TrainConfig(**values)
+    return tiny_train_config(root, tmp_path / f"{variant}.pt", variant, steps, **overrides)
 
 
 def test_variants_use_their_priors(box_data):

@@ -1,0 +1,17 @@
+"""Convention checks every node's robustness module runs on its own module-scoped `run` fixture
+(`run["conventions"]` from arm_sim.robustness.convention_report, `run["exit_code"]`, `run["log"]`).
+A test module imports these functions so that pytest collects them there."""
+
+
+def test_parameters_are_declared_with_descriptors_and_ranges(run):
+    c = run["conventions"]
+    assert c["without_description"] == [] and c["numeric_without_range"] == []
+    assert c["in_config_not_declared"] == [] and c["declared_not_in_config"] == []
+
+
+def test_bad_parameter_values_are_rejected_at_run_time(run):
+    assert run["conventions"]["bad_values_accepted_at_run_time"] == []
+
+
+def test_clean_shutdown_on_sigint(run):
+    assert run["exit_code"] == 0, run["log"][-2000:]
