@@ -4,7 +4,7 @@ crash; then kill -9 of the reconstruction node mid-run and its restart."""
 import pytest
 from robustness_nodes import reconstruction_params
 
-from arm_sim.robustness import NodeProcess, Probe, node_built, render_frames, write_camera_bag
+from arm_sim.robustness import Probe, node_built, render_frames, write_camera_bag
 from arm_sim.robustness_load import run_fault, run_load, start_graph, stop_graph
 
 LOAD_S = 20.0
@@ -25,12 +25,7 @@ def run(robustness_logs):
     probe = Probe()
     try:
         load = run_load(probe, graph, LOAD_S)
-        fault = run_fault(
-            probe,
-            graph,
-            load.pop("watch"),
-            lambda: NodeProcess("reconstruction", log_dir / "reconstruction_restarted.log", params=params),
-        )
+        fault = run_fault(probe, graph, load.pop("watch"), params, log_dir / "reconstruction_restarted.log")
     finally:
         probe.close()
         stopped = stop_graph(graph)

@@ -227,12 +227,7 @@ def phase_load_fault(args, work: pathlib.Path) -> dict:
     try:
         load = run_load(probe, graph, args.duration_s, progress=lambda s: bar.update(1))
         bar.close()
-        fault = run_fault(
-            probe,
-            graph,
-            load.pop("watch"),
-            lambda: NodeProcess("reconstruction", work / "reconstruction_restarted.log", params=params),
-        )
+        fault = run_fault(probe, graph, load.pop("watch"), params, work / "reconstruction_restarted.log")
     finally:
         probe.close()
         stopped = stop_graph(graph)

@@ -117,7 +117,9 @@ class NodeProcess:
         remaps: dict | None = None,
         args: tuple = (),
         params_file: bool = True,
+        env: dict | None = None,
     ):
+        """env: variables set for this process on top of the current environment."""
         self.key = key
         self.log_path = pathlib.Path(log_path)
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -133,7 +135,7 @@ class NodeProcess:
         self._log = open(self.log_path, "w")  # noqa: SIM115 - lives as long as the process
         self.started_s = time.monotonic()
         self.process = subprocess.Popen(
-            cmd, stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True
+            cmd, stdout=self._log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}, start_new_session=True
         )
 
     @property

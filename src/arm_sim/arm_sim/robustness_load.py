@@ -13,6 +13,10 @@ import numpy as np
 from arm_sim.robustness import NodeProcess, stamp_of, tracebacks
 
 GRAPH_ORDER = ("replay", "segmentation", "reconstruction", "planner")
+# Fast DDS 2.14's shared-memory transport can leave a port of a kill -9'd process locked, and a
+# process restarted in its place then matches its peers but receives nothing (eProsima/Fast-DDS
+# #5053, #5469). A respawned node therefore talks over UDP only.
+RESPAWN_ENV = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 
 
 def start_graph(
@@ -178,13 +182,14 @@ def run_fault(
     probe,
     graph: dict[str, NodeProcess],
     watch: GraphWatch,
-    restart,
+    recon_params: dict,
+    restart_log,
     outage_s: float = 5.0,
     resume_timeout_s: float = 180.0,
     goal_timeout_s: float = 120.0,
 ) -> dict:
     """kill -9 the reconstruction node; during the outage the planner must keep the last meshes and
-    still plan on them; after `restart()` (returns the new NodeProcess) new meshes must flow again."""
+    still plan on them; after a restart (log in restart_log, RESPAWN_ENV) new meshes must flow again."""
     from rclpy.action import ActionClient
 
     from arm_interfaces.action import Manipulate
@@ -218,11 +223,13 @@ def run_fault(
                     goal_result.update(planned=result.status == 4, message=result.result.message)
     newest = watch.last_meshes()  # anything the killed node had in flight has arrived by now
     before_stamp = stamp_of(newest) if newest is not None else float("-inf")
-    graph["reconstruction"] = restart()
+    frames_at_restart = watch.totals()["segmentation"]
+    graph["reconstruction"] = NodeProcess("reconstruction", restart_log, params=recon_params, env=RESPAWN_ENV)
     restarted_at = time.monotonic()
     resumed = probe.wait_until(
         lambda: (m := watch.last_meshes()) is not None and stamp_of(m) > before_stamp, resume_timeout_s, poll_s=0.2
     )
+    restarted = probe.diagnostic("reconstruction_node")
     return {
         "killed_exit_code": killed_code,
         "outage_s": round(restarted_at - killed_at, 1),
@@ -233,5 +240,8 @@ def run_fault(
         "goal_during_outage": goal_result,
         "resumed": resumed,
         "seconds_to_first_meshes_after_restart": round(time.monotonic() - restarted_at, 1) if resumed else None,
+        "segmented_frames_after_restart": watch.totals()["segmentation"] - frames_at_restart,
+        "restarted_node_diagnostics": {k: restarted.get(k) for k in ("frames_received", "frames_processed")},
+        "restarted_log_tail": "" if resumed else graph["reconstruction"].log()[-2000:],
         "alive_after": {k: p.alive() for k, p in graph.items()},
     }
