@@ -67,6 +67,7 @@ class ReconstructedObject:
     method: str
     error: str = ""
     probabilities: np.ndarray | None = field(default=None, repr=False)
+    from_observed_voxels: bool = False  # the network predicted nothing: the mesh is of the observed voxels
 
     @property
     def ok(self) -> bool:
@@ -232,6 +233,11 @@ class Reconstructor:
                 occupancy_mesh(p, frame, s.threshold, s.min_component_voxels)
                 for p, frame in zip(probabilities, grids.frames, strict=True)
             ]
+            # Nothing above the threshold (a sliver of an object, mostly): its observed voxels stand in,
+            # so that the object still exists for the planner.
+            from_observed = [len(m.faces) == 0 and bool(g[0].any()) for m, g in zip(meshes, grids.grids, strict=True)]
+            for n in np.flatnonzero(from_observed):
+                meshes[n] = occupancy_mesh(grids.grids[n, 0], grids.frames[n], 0.5, 1)
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
                 meshes, _ = remove_intersections(meshes)
@@ -255,7 +261,7 @@ class Reconstructor:
                     visible = estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera)
             kept = probabilities[n] if s.keep_probabilities else None
             objects[object_id] = ReconstructedObject(
-                object_id, T_world_object, local, parts, visible, frame, s.method, "", kept
+                object_id, T_world_object, local, parts, visible, frame, s.method, "", kept, from_observed[n]
             )
         return [objects[i] for i in sorted(objects)]
 

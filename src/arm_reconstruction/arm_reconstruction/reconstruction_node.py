@@ -157,6 +157,11 @@ class ReconstructionNode(Node):
         failed = [o for o in objects if not o.ok]
         for obj in failed:
             self.errors.error(f"object {obj.id}", f"object {obj.id} not reconstructed: {obj.error}")
+        for obj in objects:
+            if obj.from_observed_voxels:
+                self.errors.error(
+                    f"observed {obj.id}", f"object {obj.id}: the network predicted nothing; meshed its observed voxels"
+                )
         values = {f"{stage}_ms": 1000.0 * self.reconstructor.last_timings_s[stage] for stage in STAGES}
         values.update(
             frame_to_meshes_ms=1000.0 * (time.perf_counter() - started),
