@@ -3,6 +3,7 @@ manipulation task scenes (appendix "Cluttered Manipulation Benchmark")."""
 
 from dataclasses import dataclass, field
 
+import mujoco
 import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
@@ -10,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from arm_sim.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import ObjectModel, ObjectPool
-from arm_sim.world import OBJECT_DENSITY_KG_M3, SimWorld
+from arm_sim.world import OBJECT_DENSITY_KG_M3, SimWorld, object_body_name
 
 DROP_REGION_X = (-0.2, 0.3)  # drop centres stay clear of the robot base at x = -0.55
 DROP_REGION_Y = (-0.3, 0.3)
@@ -135,6 +136,38 @@ def _visible_fraction(scene: Scene, index: int, T_world_camera: np.ndarray) -> f
     return float(frame.visible_fraction[index])
 
 
+def _slide_into_range(scene, candidate, disc, occupied, visible_range, camera, steps: int = 7):
+    """Bisect the sideways (y) offset of an occluder that hides too much of the target (index 0)
+    between where it stands and 0.5 m further out. Returns (scene, visible fraction, disc) with the
+    fraction inside visible_range, or (None, nan, None)."""
+    lo, hi = visible_range
+    (x, y), radius = disc
+    side = 1.0 if y >= TASK_TARGET_XY[1] else -1.0
+    near, far = y, y + side * 0.5
+    table = (scene.table_height_m, scene.table_half_extent_m, scene.table_rgba)
+    trial = Scene(scene.objects + [candidate], *table)
+    world = SimWorld(trial, robot_arm=False)
+    y_adr = world.model.joint(f"{object_body_name(len(scene.objects))}_joint").qposadr[0] + 1
+    try:
+        for _ in range(steps):
+            mid = 0.5 * (near + far)
+            if any(np.hypot(x - c[0], mid - c[1]) <= r + radius + 0.005 for c, r in occupied):
+                return None, float("nan"), None
+            world.data.qpos[y_adr] = mid  # the free joint's qpos is the body's world position
+            mujoco.mj_kinematics(world.model, world.data)
+            frame = world.render(camera, noise=DepthNoise(enabled=False), with_visibility=False)
+            v = float(world.visible_fractions(frame.labels, camera)[0])
+            if lo <= v < hi:
+                T = candidate.T_world_object.copy()
+                T[1, 3] = mid
+                moved = PlacedObject(candidate.model, candidate.scale, T, candidate.rgba)
+                return Scene(trial.objects[:-1] + [moved], *table), v, ((x, mid), radius)
+            near, far = (mid, far) if v < lo else (near, mid)
+    finally:
+        world.close()
+    return None, float("nan"), None
+
+
 def task_scene(
     target: ObjectModel,
     distractor_pool: ObjectPool,
@@ -148,7 +181,8 @@ def task_scene(
 ) -> tuple[Scene, int, np.ndarray]:
     """A manipulation scene: the target upright at a fixed spot, distractors added directly in front
     of it (towards the camera, y ~ N(target y, 0.1 m)) until its visible fraction falls in
-    visible_range, then 1-7 more distractors (0.25 m std) that keep it in range.
+    visible_range (one that hides nothing is dropped, one that hides too much is slid sideways until it
+    does not), then 1-7 more distractors (0.25 m std) that keep it in range.
 
     Returns (scene, target index, T_world_camera). Raises RuntimeError if the range is not reached."""
     camera = task_camera_pose(table_height_m)
@@ -180,7 +214,9 @@ def task_scene(
             continue
         trial = Scene(scene.objects + [candidate], scene.table_height_m, scene.table_half_extent_m, scene.table_rgba)
         v = _visible_fraction(trial, 0, camera)
-        if v >= lo:  # never overshoot below the range: drop that distractor and try another
+        if v < lo:  # it hides too much: slide it sideways, out of the line of sight, until in range
+            trial, v, disc = _slide_into_range(scene, candidate, disc, occupied, (lo, hi), camera)
+        if trial is not None and lo <= v < visible - 0.01:
             scene, visible = trial, v
             occupied.append(disc)
     for _ in range(int(rng.integers(extra_distractors[0], extra_distractors[1] + 1))):
