@@ -67,3 +67,29 @@ def test_task_scene_reaches_the_requested_visibility():
     world = SimWorld(scene, robot_arm=False)
     fraction = world.render(camera, noise=DepthNoise(enabled=False)).visible_fraction[index]
     assert 0.2 <= fraction < 0.8  # settling may shift it slightly
+
+
+def test_an_occluder_that_hides_too_much_is_slid_sideways_into_the_visibility_bin():
+    from arm_sim.scenes import TASK_TARGET_XY, _slide_into_range, _visible_fraction, task_camera_pose
+
+    rng = np.random.default_rng(0)
+    camera = task_camera_pose()
+    target, wall = make_object("box", rng), make_object("box", rng)
+    scale = 0.3 / float(np.max(wall.mesh.extents))  # a 30 cm box straight in front of the target
+
+    def placed(model, s, xy):
+        T = np.eye(4)
+        T[:2, 3] = xy
+        T[2, 3] = -float(model.mesh.bounds[0, 2]) * s
+        return PlacedObject(model, s, T)
+
+    scene = Scene([placed(target, 1.0, TASK_TARGET_XY)])
+    occluder_xy = (TASK_TARGET_XY[0] + 0.2, TASK_TARGET_XY[1] + 0.01)
+    occluder = placed(wall, scale, occluder_xy)
+    assert _visible_fraction(Scene([*scene.objects, occluder]), 0, camera) < 0.1
+    target_disc = (TASK_TARGET_XY, 0.5 * float(np.max(target.mesh.extents[:2])))
+    disc = (occluder_xy, 0.5 * float(np.max(wall.mesh.extents[:2])) * scale)
+    slid, fraction, new_disc = _slide_into_range(scene, occluder, disc, [target_disc], (0.4, 0.6), camera)
+    assert slid is not None and 0.4 <= fraction < 0.6
+    assert new_disc[0][1] > occluder_xy[1] and slid.objects[1].T_world_object[1, 3] == new_disc[0][1]
+    assert abs(_visible_fraction(slid, 0, camera) - fraction) < 1e-9
