@@ -1,13 +1,12 @@
 """rosbag2 bags: round trips in both storages, and corrupt, truncated or missing bags handled with a
 clear error by the core, by replay (exit code 2, no traceback) and by record."""
 
-import shutil
-
 import numpy as np
 import pytest
 from sensor_msgs.msg import Image
 
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_sim import robustness
 from arm_sim.bags import (
     BagError,
     BagReader,
@@ -79,24 +78,7 @@ def test_unknown_type_and_existing_output_are_refused(tmp_path):
 
 
 def broken_bags(tmp_path) -> dict:
-    write_bag(tmp_path / "good_mcap", project_messages(), "mcap")
-    write_bag(tmp_path / "good_sqlite", project_messages(), "sqlite3")
-    bags = {}
-    for name, source, fraction in [("truncated_mcap", "good_mcap", 0.5), ("truncated_sqlite", "good_sqlite", 0.5)]:
-        shutil.copytree(tmp_path / source, tmp_path / name)
-        storage = next(p for p in (tmp_path / name).iterdir() if p.suffix in (".mcap", ".db3"))
-        data = storage.read_bytes()
-        storage.write_bytes(data[: int(len(data) * fraction)])
-        bags[name] = tmp_path / name
-    (tmp_path / "empty_dir").mkdir()
-    bags["empty directory"] = tmp_path / "empty_dir"
-    bags["missing"] = tmp_path / "does_not_exist"
-    garbage = tmp_path / "garbage.mcap"
-    garbage.write_bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8).tobytes())
-    bags["garbage .mcap"] = garbage
-    (tmp_path / "notes.txt").write_text("not a bag")
-    bags["text file"] = tmp_path / "notes.txt"
-    return bags
+    return robustness.broken_bags(tmp_path, project_messages())
 
 
 def test_broken_bags_raise_a_clear_bag_error(tmp_path):

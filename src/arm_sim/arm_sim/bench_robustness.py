@@ -106,27 +106,11 @@ def phase_bad_input_sim(args, work: pathlib.Path) -> dict:
 
 def phase_bags(args, work: pathlib.Path) -> dict:
     """Broken bags through the core reader and through `replay` (which must exit 2, no traceback)."""
-    from arm_sim.bags import BagError, BagReader, write_bag
+    from arm_sim.bags import BagError, BagReader
 
     frame = render_frames(2, 64, 48, seed=0)[0]
     good = [("/" + t, (i + 1) * 10**8, m) for i, (t, m) in enumerate(robustness.camera_messages(frame, 1.0).items())]
-    cases = {}
-    for storage in ("mcap", "sqlite3"):
-        write_bag(work / f"good_{storage}", good, storage)
-        for fraction in (0.5, 0.9):
-            name = f"{storage} truncated to {int(fraction * 100)} %"
-            path = work / f"truncated_{storage}_{int(fraction * 100)}"
-            shutil.copytree(work / f"good_{storage}", path)
-            storage_file = next(p for p in path.iterdir() if p.suffix in (".mcap", ".db3"))
-            data = storage_file.read_bytes()
-            storage_file.write_bytes(data[: int(len(data) * fraction)])
-            cases[name] = path
-    (work / "empty_dir").mkdir()
-    cases["empty directory"] = work / "empty_dir"
-    cases["missing path"] = work / "missing"
-    garbage = work / "garbage.mcap"
-    garbage.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
-    cases["random bytes .mcap"] = garbage
+    cases = robustness.broken_bags(work, good)
     results = []
     for name, path in cases.items():
         try:
