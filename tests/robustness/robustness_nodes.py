@@ -7,7 +7,7 @@ ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..." adds parameters); tests that need 
 import pytest
 
 from arm_sim import robustness
-from arm_sim.robustness import NodeProcess, node_built
+from arm_sim.robustness import NodeProcess, Probe, convention_report, node_built
 
 
 def reconstruction_params() -> dict:
@@ -21,3 +21,19 @@ def start(key: str, log_dir, **kwargs) -> NodeProcess:
     if not node_built(key):
         pytest.skip(f"{key} node is not built (colcon build)")
     return NodeProcess(key, log_dir / f"{key}.log", **kwargs)
+
+
+def run_against(key: str, log_dir, cases, endpoints: dict | None = None, **start_kwargs) -> dict:
+    """Start the node, run cases(probe, process) -> report from a DDS probe, then read each of
+    `endpoints` (name -> fn(probe)) and the node's conventions, and stop it with SIGINT.
+    -> {"report", "conventions", "exit_code", "log", **endpoints}."""
+    process = start(key, log_dir, **start_kwargs)
+    probe = Probe()
+    try:
+        report = cases(probe, process)
+        seen = {name: read(probe) for name, read in (endpoints or {}).items()}
+        conventions = convention_report(probe, key)
+    finally:
+        probe.close()
+        exit_code = process.stop()
+    return {"report": report, "conventions": conventions, "exit_code": exit_code, "log": process.log(), **seen}

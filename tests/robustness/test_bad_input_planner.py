@@ -7,9 +7,8 @@ from node_conventions import (  # noqa: F401  collected here
     test_parameters_are_declared_with_descriptors_and_ranges,
 )
 from rclpy.qos import DurabilityPolicy
-from robustness_nodes import start
+from robustness_nodes import run_against
 
-from arm_sim.robustness import Probe, convention_report
 from arm_sim.robustness_cases import run_planner_bad_inputs
 
 FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
@@ -17,22 +16,8 @@ FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
 
 @pytest.fixture(scope="module")
 def run(robustness_logs):
-    process = start("planner", robustness_logs, params=FAST_PLANNER)
-    probe = Probe()
-    try:
-        report = run_planner_bad_inputs(probe, process)
-        subscriptions = probe.node.get_subscriptions_info_by_topic("/arm/meshes")
-        conventions = convention_report(probe, "planner")
-    finally:
-        probe.close()
-        exit_code = process.stop()
-    return {
-        "report": report,
-        "subscriptions": subscriptions,
-        "conventions": conventions,
-        "exit_code": exit_code,
-        "log": process.log(),
-    }
+    subscriptions = {"subscriptions": lambda probe: probe.node.get_subscriptions_info_by_topic("/arm/meshes")}
+    return run_against("planner", robustness_logs, run_planner_bad_inputs, subscriptions, params=FAST_PLANNER)
 
 
 def test_stays_alive_answers_every_goal_and_publishes_nothing_wrong(run):

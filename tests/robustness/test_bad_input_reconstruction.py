@@ -7,30 +7,19 @@ from node_conventions import (  # noqa: F401  collected here
     test_parameters_are_declared_with_descriptors_and_ranges,
 )
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
-from robustness_nodes import reconstruction_params, start
+from robustness_nodes import reconstruction_params, run_against
 
-from arm_sim.robustness import Probe, convention_report
 from arm_sim.robustness_cases import run_reconstruction_bad_inputs
 
 
 @pytest.fixture(scope="module")
 def run(frames, robustness_logs):
-    process = start("reconstruction", robustness_logs, params=reconstruction_params())
-    probe = Probe()
-    try:
-        report = run_reconstruction_bad_inputs(probe, process, frames)
-        publishers = probe.node.get_publishers_info_by_topic("/arm/meshes")
-        conventions = convention_report(probe, "reconstruction")
-    finally:
-        probe.close()
-        exit_code = process.stop()
-    return {
-        "report": report,
-        "publishers": publishers,
-        "conventions": conventions,
-        "exit_code": exit_code,
-        "log": process.log(),
-    }
+    publishers = {"publishers": lambda probe: probe.node.get_publishers_info_by_topic("/arm/meshes")}
+
+    def cases(probe, process):
+        return run_reconstruction_bad_inputs(probe, process, frames)
+
+    return run_against("reconstruction", robustness_logs, cases, publishers, params=reconstruction_params())
 
 
 def test_stays_alive_and_publishes_nothing_wrong(run):

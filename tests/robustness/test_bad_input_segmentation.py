@@ -7,9 +7,9 @@ from node_conventions import (  # noqa: F401  collected here
     test_parameters_are_declared_with_descriptors_and_ranges,
 )
 from rclpy.qos import ReliabilityPolicy
-from robustness_nodes import start
+from robustness_nodes import run_against
 
-from arm_sim.robustness import CAMERA_TOPICS, Probe, convention_report
+from arm_sim.robustness import CAMERA_TOPICS
 from arm_sim.robustness_cases import run_segmentation_bad_inputs
 
 PREFIX = "/robustness/"
@@ -19,22 +19,14 @@ PREFIX = "/robustness/"
 def run(frames, robustness_logs):
     remaps = {t: PREFIX + t for t in CAMERA_TOPICS}
     remaps["arm/segmented_frame"] = PREFIX + "segmented_frame"
-    process = start("segmentation", robustness_logs, params={"image_reliability": "reliable"}, remaps=remaps)
-    probe = Probe()
-    try:
-        report = run_segmentation_bad_inputs(probe, process, frames, PREFIX + "segmented_frame", input_prefix=PREFIX)
-        subscriptions = probe.node.get_subscriptions_info_by_topic(PREFIX + "camera/color/image_raw")
-        conventions = convention_report(probe, "segmentation")
-    finally:
-        probe.close()
-        exit_code = process.stop()
-    return {
-        "report": report,
-        "subscriptions": subscriptions,
-        "conventions": conventions,
-        "exit_code": exit_code,
-        "log": process.log(),
-    }
+
+    def cases(probe, process):
+        return run_segmentation_bad_inputs(probe, process, frames, PREFIX + "segmented_frame", input_prefix=PREFIX)
+
+    image = PREFIX + "camera/color/image_raw"
+    subscriptions = {"subscriptions": lambda probe: probe.node.get_subscriptions_info_by_topic(image)}
+    params = {"image_reliability": "reliable"}
+    return run_against("segmentation", robustness_logs, cases, subscriptions, params=params, remaps=remaps)
 
 
 def test_stays_alive_and_publishes_nothing_wrong(run):

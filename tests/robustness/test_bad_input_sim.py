@@ -6,23 +6,15 @@ from node_conventions import (  # noqa: F401  collected here
     test_clean_shutdown_on_sigint,
     test_parameters_are_declared_with_descriptors_and_ranges,
 )
-from robustness_nodes import start
+from robustness_nodes import run_against
 
-from arm_sim.robustness import Probe, convention_report
 from arm_sim.robustness_cases import run_sim_bad_inputs
 
 
 @pytest.fixture(scope="module")
 def run(robustness_logs):
-    process = start("sim", robustness_logs, params={"n_objects": 3, "camera_rate_hz": 0.2, "width": 160, "height": 120})
-    probe = Probe()
-    try:
-        report = run_sim_bad_inputs(probe, process)
-        conventions = convention_report(probe, "sim")
-    finally:
-        probe.close()
-        exit_code = process.stop()
-    return {"report": report, "conventions": conventions, "exit_code": exit_code, "log": process.log()}
+    params = {"n_objects": 3, "camera_rate_hz": 0.2, "width": 160, "height": 120}
+    return run_against("sim", robustness_logs, run_sim_bad_inputs, params=params)
 
 
 def test_stays_alive_and_joint_states_stay_valid(run):
