@@ -213,13 +213,19 @@ class FrameObservation:
         max_support = bottom + SUPPORT_TOLERANCE_M
         source = "given"
         table = table_height_m
+
+        def plausible(height: float | None) -> float | None:
+            # A support so far below that the seen bottom would sit in the grid's upper half (the floor
+            # past a table edge, say) is not this object's: its points would fall out of the grid.
+            return height if height is not None and np.isfinite(height) and bottom - height <= side / 2 else None
+
         if table is None:
             x, y = self.background_x, self.background_y
             inside = (x >= xy_min[0]) & (x < xy_min[0] + side) & (y >= xy_min[1]) & (y < xy_min[1] + side)
-            table, source = support_height(self.background_z[inside], max_support, min_points=10), "local"
+            table, source = plausible(support_height(self.background_z[inside], max_support, min_points=10)), "local"
         if table is None:
-            table, source = self.frame_table_height(max_support), "frame"
-        if table is None or not np.isfinite(table):
+            table, source = plausible(self.frame_table_height(max_support)), "frame"
+        if table is None:
             table, source = float(own[:, 2].min()), "object"
         origin = np.array([xy_min[0], xy_min[1], table], dtype=np.float64)
         return GridFrame(origin, float(voxel), int(resolution), float(table), source)

@@ -1,8 +1,8 @@
 """Occupancy probabilities -> simulation-ready world-frame meshes (paper Section 3.1, post-processing).
 
-Threshold, drop specks, marching cubes (scikit-image) on the zero-padded probability field (closed,
-watertight surfaces; the surface crosses the threshold between voxel centres), back to the world
-frame, then inter-object intersection removal that cuts from the larger mesh (manifold3d booleans).
+Threshold, drop components apart from the observed voxels and specks, marching cubes (scikit-image)
+on the zero-padded probability field (closed, watertight surfaces; the surface crosses the threshold
+between voxel centres), back to the world frame, then inter-object intersection removal that cuts from the larger mesh (manifold3d booleans).
 Also the inference-time method variants: ray carving and extrusion down to the table.
 """
 
@@ -48,6 +48,23 @@ def drop_small_components(
     return np.where(small[labels], np.float32(0.0), probabilities).astype(np.float32)
 
 
+def keep_observed_components(probabilities: np.ndarray, threshold: float, observed: np.ndarray) -> np.ndarray:
+    """Zero the probabilities of occupied components (6-connected) that touch no observed voxel of
+    the object (F1, within one voxel): a connected rigid object contains what was seen of it, so a
+    component apart from it is not the object. Unchanged when no component touches (or none was seen)."""
+    occupied = probabilities > threshold
+    seen = np.asarray(observed) > 0
+    if not occupied.any() or not seen.any():
+        return probabilities
+    labels, count = ndimage.label(occupied)
+    near_seen = ndimage.binary_dilation(seen, structure=np.ones((3, 3, 3), bool))
+    touching = np.zeros(count + 1, bool)
+    touching[np.unique(labels[near_seen & occupied])] = True
+    if not touching.any():
+        return probabilities
+    return np.where(occupied & ~touching[labels], np.float32(0.0), probabilities).astype(np.float32)
+
+
 def empty_mesh() -> trimesh.Trimesh:
     return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
 
@@ -57,17 +74,21 @@ def occupancy_mesh(
     frame: GridFrame,
     threshold: float = DEFAULT_THRESHOLD,
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS,
+    observed: np.ndarray | None = None,
 ) -> trimesh.Trimesh:
     """World-frame watertight mesh of the voxels whose probability exceeds threshold (empty mesh when
     none do). The grid is zero-padded so that shapes touching the grid faces are closed there; the
     surface below the bottom layer's centres is flattened onto the table plane (grid z = 0), so that
-    a shape standing on the table rests on it with a flat base."""
+    a shape standing on the table rests on it with a flat base. observed [d, d, d]: the object's
+    observed voxels (grid channel F1); components apart from them are dropped."""
     if not 0.0 < threshold < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold}")
     probabilities = np.nan_to_num(np.asarray(probabilities, dtype=np.float32), nan=0.0)
     d = frame.resolution
     if probabilities.shape != (d, d, d):
         raise ValueError(f"probabilities shape {probabilities.shape} does not match the grid ({d},{d},{d})")
+    if observed is not None:
+        probabilities = keep_observed_components(probabilities, threshold, observed)
     probabilities = drop_small_components(probabilities, threshold, min_component_voxels)
     if not (probabilities > threshold).any():
         return empty_mesh()

@@ -230,8 +230,8 @@ class Reconstructor:
         labels = np.asarray(labels)
         with self.timer("meshing"):
             meshes = [
-                occupancy_mesh(p, frame, s.threshold, s.min_component_voxels)
-                for p, frame in zip(probabilities, grids.frames, strict=True)
+                occupancy_mesh(p, frame, s.threshold, s.min_component_voxels, observed=g[0])
+                for p, frame, g in zip(probabilities, grids.frames, grids.grids, strict=True)
             ]
             # Nothing above the threshold (a sliver of an object, mostly): its observed voxels stand in,
             # so that the object still exists for the planner.

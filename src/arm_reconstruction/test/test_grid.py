@@ -137,6 +137,19 @@ def test_two_table_levels_are_found_per_object():
     assert heights[2] == pytest.approx(0.0, abs=0.004)
 
 
+def test_a_support_far_below_the_object_is_not_taken_for_its_table():
+    """A box on a pedestal as small as its base, the floor 0.75 m down: the floor is the only level
+    in view, but the box's points must stay inside its grid, so the grid stands on the box's bottom."""
+    K = intrinsics()
+    T = look_at((0.5, 0.1, 0.45), (0.0, 0.0, 0.04))
+    floor = table(z=-0.75, half=3.0)
+    pedestal = box((0.05, 0.05, 0.75), (0.0, 0.0, -0.75))
+    depth, labels = raycast([floor, pedestal, box((0.05, 0.05, 0.08), (0.0, 0.0, 0.0))], [0, 0, 1], K, T)
+    grid, frame = four_channel_grid(depth, K, T, labels, 1)
+    assert frame.table_source == "object" and frame.table_height_m == pytest.approx(0.0, abs=0.01)
+    assert grid[0].sum() > 0.5 * (labels == 1).sum() ** 0.5, "the box's own voxels are in its grid"
+
+
 def test_table_is_robust_to_depth_noise(scene):
     rng = np.random.default_rng(0)
     noisy = scene["depth"] + rng.normal(0, 0.003, scene["depth"].shape).astype(np.float32)

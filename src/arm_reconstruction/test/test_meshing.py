@@ -5,6 +5,7 @@ import trimesh
 from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import (
     drop_small_components,
+    keep_observed_components,
     extrude_to_table,
     occupancy_mesh,
     ray_carve,
@@ -93,6 +94,23 @@ def test_specks_are_dropped_and_bad_probabilities_are_handled():
         occupancy_mesh(np.zeros((8, 8, 8)), frame)
     with pytest.raises(ValueError, match="threshold"):
         occupancy_mesh(probabilities, frame, threshold=1.0)
+
+
+def test_components_apart_from_the_observed_voxels_are_dropped():
+    frame = GridFrame(np.zeros(3), 0.01, 16, 0.0)
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[2:5, 2:5, 0:4] = 0.9  # holds the observed voxels
+    probabilities[10:15, 10:15, 0:6] = 0.8  # larger, but nowhere near what was seen
+    observed = np.zeros((16, 16, 16), np.float32)
+    observed[5, 3, 1] = 1.0  # one voxel beside the first component
+    kept = keep_observed_components(probabilities, 0.5, observed)
+    assert kept[2:5, 2:5, 0:4].min() == 0.9 and kept[10:15, 10:15].max() == 0
+    assert np.array_equal(keep_observed_components(probabilities, 0.5, np.zeros_like(observed)), probabilities)
+    far = np.zeros_like(observed)
+    far[8, 0, 12] = 1.0
+    assert np.array_equal(keep_observed_components(probabilities, 0.5, far), probabilities), "none touch: unchanged"
+    mesh = occupancy_mesh(probabilities, frame, observed=observed)
+    assert len(mesh.split(only_watertight=False)) == 1 and mesh.bounds[1, 0] < 0.06
 
 
 def test_intersections_are_cut_from_the_larger_mesh():
