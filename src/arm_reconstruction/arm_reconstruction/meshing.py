@@ -2,8 +2,9 @@
 
 Threshold, drop components apart from the observed voxels and specks, marching cubes (scikit-image)
 on the zero-padded probability field (closed, watertight surfaces; the surface crosses the threshold
-between voxel centres), back to the world frame, then inter-object intersection removal that cuts from the larger mesh (manifold3d booleans).
-Also the inference-time method variants: ray carving and extrusion down to the table.
+between voxel centres), back to the world frame, then inter-object intersection removal that cuts
+from the larger mesh (manifold3d booleans). Also the inference-time method variants: ray carving and
+extrusion down to the table.
 """
 
 import manifold3d

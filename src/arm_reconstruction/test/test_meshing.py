@@ -5,8 +5,8 @@ import trimesh
 from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import (
     drop_small_components,
-    keep_observed_components,
     extrude_to_table,
+    keep_observed_components,
     occupancy_mesh,
     ray_carve,
     remove_intersections,
