@@ -4,7 +4,9 @@ Each episode is one task scene: a target object at a fixed spot, distractors in 
 visible fraction falls in the episode's bin, one RGB-D view from the robot side with ground-truth
 instance labels (as in the paper). Every method reconstructs the scene from that view (ground truth
 uses the true meshes), the planner plans the task in a twin of that reconstruction, and the plan is
-executed open loop in the ground-truth world. Success: grasp lifts the target >= 5 cm; push moves it
+executed in the ground-truth world: closed loop by default (every --observe-period seconds the twin
+takes the world's joint states and tracked object poses; see arm_planner.world_execution), or open
+loop as in the paper with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes.
@@ -24,9 +26,10 @@ from tqdm import tqdm
 from arm_planner.bench_stats import BINS, bin_label, summarise, write_plots, write_report
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.planner import PlannerConfig
-from arm_planner.rewards import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
+from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.session import ManipulationSession
 from arm_planner.twin import TwinObject
+from arm_planner.world_execution import run_in_world
 
 GOALS = {
     TASK_GRASP: (0.0, 0.0, 0.0),
@@ -36,7 +39,6 @@ GOALS = {
 TOLERANCE_M = 0.025
 GROUND_TRUTH = "ground_truth"
 DEFAULT_METHODS = (GROUND_TRUTH, "baseline", "baseline+E", "arm")
-HOLD_AFTER_S = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,12 +102,14 @@ def reconstructed_objects(method: str, frame) -> list[TwinObject]:
     ]
 
 
-def target_stability_m(session: ManipulationSession, target_id: int, seconds: float = 1.0) -> float:
-    """How far the target's centre moves when its twin (robot still at home) settles: 0 = stable."""
+def target_stability_m(session: ManipulationSession, target_id: int, objects, table_height_m: float) -> float:
+    """How far the target's centre moves in 1 s when its twin (objects as viewed, robot still at home)
+    settles: 0 = stable."""
     import mujoco
 
     from arm_sim import robot
 
+    session.set_objects(objects, table_height_m)
     twin = session.twin
     if twin is None or target_id not in twin:
         return float("nan")
@@ -113,36 +117,20 @@ def target_stability_m(session: ManipulationSession, target_id: int, seconds: fl
     flags = model.opt.enableflags
     model.opt.enableflags = flags & ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     data = mujoco.MjData(model)
-    mujoco.mj_setState(model, data, twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M), STATE_SPEC)
+    poses = {o.id: o.T_world_object for o in objects}
+    mujoco.mj_setState(model, data, twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M, poses), STATE_SPEC)
     mujoco.mj_forward(model, data)
     body = model.body(twin.body_name(target_id)).id
     start = data.xipos[body].copy()
-    mujoco.mj_step(model, data, nstep=int(round(seconds / model.opt.timestep)))
+    mujoco.mj_step(model, data, nstep=int(round(1.0 / model.opt.timestep)))
     mujoco.mj_forward(model, data)
     model.opt.enableflags = flags
     return float(np.linalg.norm(data.xipos[body] - start))
 
 
-def execute_in_world(scene, target_index: int, task: str, outcome) -> tuple[bool, float]:
-    """Run the plan open loop in the ground-truth world -> (success, error m)."""
+def run_method(method, scene, target_index, frame, task, config, twin_timestep_s, period_steps) -> dict:
     from arm_sim.world import SimWorld
 
-    world = SimWorld(scene, robot_arm=True)
-    body = world.object_ids[target_index]
-    start = world.data.xipos[body].copy()
-    result = outcome.result
-    world.execute(result.times_s, result.joint_positions)
-    world.execute(np.array([HOLD_AFTER_S]), result.joint_positions[-1:])
-    end = world.data.xipos[body].copy()
-    world.close()
-    if task == TASK_GRASP:
-        lift = float(end[2] - start[2])
-        return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
-    error = float(np.linalg.norm(end - (start + np.asarray(GOALS[task]))))
-    return error <= TOLERANCE_M, error
-
-
-def run_method(method, scene, target_index, frame, task, config, twin_timestep_s) -> dict:
     started = time.perf_counter()
     row = {"method": method}
     try:
@@ -152,28 +140,31 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
             return row | {"success": False, "unavailable": f"{type(error).__name__}: {error}"}
         return row | {"success": False, "failure": f"reconstruction failed: {type(error).__name__}: {error}"}
     row["reconstruct_s"] = time.perf_counter() - started
-    from arm_sim import robot
-
     session = ManipulationSession(config, twin_timestep_s)
-    session.set_objects(objects, scene.table_height_m)
-    target_id = target_index + 1
-    outcome = session.request(task, target_id, GOALS[task], TOLERANCE_M, robot.HOME_Q, robot.GRIPPER_OPEN_M)
-    row.update(
-        predicted_success=bool(outcome.success),
-        predicted_error_m=outcome.final_error_m,
-        plan_message=outcome.message,
-        twin_objects=outcome.twin_objects,
-    )
-    if outcome.result is not None and len(outcome.result.step_ms):
-        row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
-        row["plan_steps"] = len(outcome.result.times_s)
-    if session.twin is not None:
-        row["target_stability_m"] = target_stability_m(session, target_id)
-    session.close()
-    if not outcome.planned:
-        return row | {"success": False, "failure": outcome.message, "seconds": time.perf_counter() - started}
-    success, error = execute_in_world(scene, target_index, task, outcome)
-    return row | {"success": bool(success), "error_m": error, "seconds": time.perf_counter() - started}
+    world = SimWorld(scene, robot_arm=True)
+    try:
+        run = run_in_world(
+            session, world, objects, scene.table_height_m, target_index, task, GOALS[task], TOLERANCE_M, period_steps
+        )
+        outcome = run.outcome
+        row.update(
+            predicted_success=bool(outcome.success),
+            predicted_error_m=outcome.final_error_m,
+            plan_message=outcome.message,
+            twin_objects=outcome.twin_objects,
+            observations=run.observations,
+        )
+        if outcome.result is not None and len(outcome.result.step_ms):
+            row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
+            row["plan_steps"] = len(outcome.result.times_s)
+        if session.twin is not None:
+            row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
+    finally:
+        session.close()
+        world.close()
+    if not run.outcome.planned:
+        return row | {"success": False, "failure": run.outcome.message, "seconds": time.perf_counter() - started}
+    return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
 
 
 def _json_safe(value):
@@ -215,6 +206,12 @@ def main(argv=None) -> int:
     parser.add_argument("--rearrange-steps", type=int, default=300, help="rearrange step budget (0: --steps)")
     parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
+    parser.add_argument(
+        "--observe-period",
+        type=float,
+        default=0.1,
+        help="closed loop: the twin observes the world's state every this many seconds (0: open loop, the paper's)",
+    )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
@@ -240,6 +237,7 @@ def main(argv=None) -> int:
     config.mppi.nthread = args.nthread
     config.close_steps = args.close_steps
     config.task_steps = {"rearrange": args.rearrange_steps} if args.rearrange_steps else {}
+    period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
     done = load_done(log)
     settings = {
         "episodes": n,
@@ -250,6 +248,7 @@ def main(argv=None) -> int:
         "steps": args.steps,
         "close_steps": args.close_steps,
         "twin_timestep_s": args.twin_timestep,
+        "observe_period_s": args.observe_period,
         "objects": args.objects or "procedural heldout categories",
     }
     progress = tqdm(
@@ -280,7 +279,9 @@ def main(argv=None) -> int:
                     progress.update(1)
                 continue
             for method in todo:
-                row = base | run_method(method, scene, target_index, frame, episode.task, config, args.twin_timestep)
+                row = base | run_method(
+                    method, scene, target_index, frame, episode.task, config, args.twin_timestep, period_steps
+                )
                 sink.write(json.dumps(row) + "\n")
                 sink.flush()
                 done[(episode.index, method)] = row

@@ -27,7 +27,7 @@ from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
-from arm_planner.planner import PlannerConfig
+from arm_planner.planner import PlannerConfig, resume_point
 from arm_planner.session import ManipulationSession, Outcome
 from arm_sim.conversions import ConversionError
 from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
@@ -251,9 +251,7 @@ class PlanNode(Node):
             if last:
                 break
             time.sleep(float(result.times_s[chunk - 1]))
-            state = result.states[chunk - 1]
-            steps_in_state = next((i for i, s in enumerate(reversed(result.states[:chunk])) if s != state), chunk)
-            resume = (state, steps_in_state)
+            resume = resume_point(result.states, chunk)
             replanned = self._plan_once(goal_handle, task, goal, resume, start_com)
             if not replanned.planned:
                 self.errors.error("replan", f"re-planning failed, keeping the executed prefix: {replanned.message}")

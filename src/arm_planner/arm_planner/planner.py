@@ -100,9 +100,23 @@ class PlanResult:
     step_ms: np.ndarray
     # CPU time per step summed over all threads of the process (rollout workers included), ms.
     step_cpu_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # Planning stopped early: the task was met and held for done_hold_steps in the twin.
+    held: bool = False
 
 
 Feedback = Callable[[int, int, str, float], None]
+# Closed loop: called after every executed control step with (step, control, twin model, twin data);
+# returns True when it overwrote the twin's qpos/qvel with an observation of the real state.
+Observe = Callable[[int, np.ndarray, mujoco.MjModel, mujoco.MjData], bool]
+
+
+def resume_point(states: list[str], executed_steps: int) -> tuple[str, int]:
+    """(task state, steps spent in it) after the first `executed_steps` steps of a plan: where a
+    re-plan from the executed prefix continues."""
+    prefix = states[:executed_steps]
+    state = prefix[-1]
+    steps_in_state = next((i for i, s in enumerate(reversed(prefix)) if s != state), len(prefix))
+    return state, steps_in_state
 
 
 class Planner:
@@ -138,6 +152,15 @@ class Planner:
         creeping = (np.linalg.norm(qvel[:, :3], axis=1) < 0.02) & (np.linalg.norm(qvel[:, 3:], axis=1) < 0.2)
         qvel[creeping] = 0.0
         data.qvel[self._object_dofs] = qvel.reshape(-1)
+
+    def _rest_objects_here(self, data: mujoco.MjData) -> None:
+        """Objects at rest in `data` sleep there in the rollouts: MuJoCo initialises sleeping islands at
+        qpos0, so qpos0 takes their current poses and the rollout data are reset."""
+        if self.config.sleep_objects:
+            self.model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
+            self._stop_creeping(data)
+            self.mppi.rollout.reset_data()
+        mujoco.mj_forward(self.model, data)
 
     def _reward(self, request: PlanRequest, geometry: TargetGeometry):
         target_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, request.target_body)
@@ -209,8 +232,10 @@ class Planner:
         geometry: TargetGeometry,
         feedback: Feedback | None = None,
         should_stop: Callable[[], bool] | None = None,
+        observe: Observe | None = None,
     ) -> PlanResult:
-        """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open."""
+        """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open.
+        With `observe`, each executed step can be corrected by the real state (closed loop)."""
         cfg = self.config
         model, data, robot = self.model, self._data, self.robot
         reward = self._last_reward = self._reward(request, geometry)
@@ -223,16 +248,11 @@ class Planner:
         mujoco.mj_step(model, data, nstep=int(round(cfg.settle_s / model.opt.timestep)))
         data.time = 0.0
         if cfg.sleep_objects:
-            # Rollout data start with the objects asleep in their settled configuration: MuJoCo
-            # initialises sleeping islands at qpos0, so qpos0 takes the settled object poses.
-            model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
-            self._stop_creeping(data)
             set_sleep(model, self._object_trees, start_asleep=True)
-            self.mppi.rollout.reset_data()
-        mujoco.mj_forward(model, data)
+        self._rest_objects_here(data)
         self.mppi.reset()
         controls, states, step_ms, step_cpu_ms = [], [], [], []
-        met_streak, met, error = 0, False, float("inf")
+        met_streak, met, error, held = 0, False, float("inf"), False
         message = "step budget used"
         budget = int(cfg.task_steps.get(request.task) or cfg.mppi.steps)
         for step in range(budget):
@@ -254,6 +274,8 @@ class Planner:
                 message = f"twin physics diverged at step {step}"
                 met, error = False, float("inf")
                 break
+            if observe is not None and observe(step, ctrl, model, data):
+                self._rest_objects_here(data)
             executed = get_state(model, data)
             states.append(reward.update(executed))
             controls.append(ctrl.copy())
@@ -266,6 +288,7 @@ class Planner:
                 feedback(step + 1, budget, states[-1], error)
             if cfg.done_hold_steps and met_streak >= cfg.done_hold_steps:
                 message = f"task met in the twin after {step + 1} steps"
+                held = True
                 break
         else:
             message = "task met in the twin" if met else "step budget used without meeting the task"
@@ -282,4 +305,5 @@ class Planner:
             states=states,
             step_ms=np.array(step_ms),
             step_cpu_ms=np.array(step_cpu_ms),
+            held=held,
         )

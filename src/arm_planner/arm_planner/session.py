@@ -12,7 +12,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_planner.planner import DEFAULT_TOLERANCE_M, Feedback, Planner, PlannerConfig, PlanRequest, PlanResult
+from arm_planner.planner import (
+    DEFAULT_TOLERANCE_M,
+    Feedback,
+    Observe,
+    Planner,
+    PlannerConfig,
+    PlanRequest,
+    PlanResult,
+)
 from arm_planner.rewards import TASK_GRASP, TASKS
 from arm_planner.robot_spec import RobotSpec
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, panda_robot_spec
@@ -110,6 +118,7 @@ class ManipulationSession:
         start_com_world=None,
         resume_state: str | None = None,
         resume_steps_in_state: int = 0,
+        observe: Observe | None = None,
     ) -> Outcome:
         """Plan `task` on object `target_id` from the given robot state; never raises on bad input."""
         if task not in TASKS:
@@ -158,7 +167,9 @@ class ManipulationSession:
         )
         try:
             state = twin.initial_state(arm_q, float(gripper_opening_m), poses)
-            result = self.planner.plan(state, plan_request, geometry, feedback=feedback, should_stop=should_stop)
+            result = self.planner.plan(
+                state, plan_request, geometry, feedback=feedback, should_stop=should_stop, observe=observe
+            )
         except (ValueError, FloatingPointError, RuntimeError) as error:
             return Outcome(False, f"planning failed: {error}", skipped=dict(twin.skipped))
         return Outcome(

@@ -1,0 +1,133 @@
+"""Running plans in the ground-truth world (arm_sim's SimWorld) for the manipulation benchmark.
+
+Open loop (the paper's protocol): one plan from the first view, executed afterwards to its end.
+Closed loop: every control step the planner executes in its twin also runs in the world, and every
+`period_steps` steps the twin's state is replaced by an observation of the world: the robot's joint
+positions and velocities, and each object's pose from a perfect tracker (the object's true rigid
+motion since the view, applied to the method's own mesh; shapes stay the method's reconstruction).
+Same step budget as open loop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from arm_planner.rewards import GRASP_LIFT_M, TASK_GRASP
+from arm_planner.session import ManipulationSession, Outcome
+from arm_planner.twin import TwinObject
+
+HOLD_AFTER_S = 0.5
+
+
+@dataclasses.dataclass
+class WorldRun:
+    """The world's verdict (task met, error m) on a plan and the plan's outcome in the twin."""
+
+    success: bool
+    error_m: float
+    outcome: Outcome
+    observations: int = 0
+
+
+def task_outcome(task: str, start: np.ndarray, end: np.ndarray, goal_displacement_m, tolerance_m: float):
+    """(met, error m) of the target's centre moving from start to end (world, m)."""
+    if task == TASK_GRASP:
+        lift = float(end[2] - start[2])
+        return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
+    error = float(np.linalg.norm(end - (start + np.asarray(goal_displacement_m))))
+    return error <= tolerance_m, error
+
+
+def tracked_pose(T_view_true: np.ndarray, T_now_true: np.ndarray, T_view_method: np.ndarray) -> np.ndarray:
+    """The method's object pose moved by the true object's rigid motion since the view."""
+    return T_now_true @ np.linalg.inv(T_view_true) @ T_view_method
+
+
+class WorldSync:
+    """Planner `observe` hook: executes each control step in the world and, every `period_steps`,
+    writes the world's robot state and tracked object poses and velocities into the twin."""
+
+    def __init__(self, session: ManipulationSession, world, objects: list[TwinObject], period_steps: int):
+        from arm_sim import robot
+
+        self.session, self.world, self.period = session, world, int(period_steps)
+        self.control_dt_s = session.config.mppi.control_dt_s
+        self.objects = {o.id: o for o in objects}
+        self.poses_at_view = world.object_poses()
+        self.joint_names = tuple(robot.JOINT_NAMES) + tuple(robot.FINGER_JOINT_NAMES)
+        self.actuators = None
+        self.observations = 0
+
+    def _set_object(self, model, data, name: str, world_body: int, T_twin: np.ndarray) -> None:
+        w = self.world
+        joint = model.body(name).jntadr[0]
+        qadr, vadr = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, np.ascontiguousarray(T_twin[:3, :3]).reshape(9))
+        data.qpos[qadr : qadr + 7] = np.concatenate([T_twin[:3, 3], quat])
+        wjoint = w.model.body_jntadr[world_body]
+        wv = w.data.qvel[w.model.jnt_dofadr[wjoint] : w.model.jnt_dofadr[wjoint] + 6]
+        R_world = w.data.xmat[world_body].reshape(3, 3)
+        omega = R_world @ wv[3:]  # free joint: angular velocity in the body frame
+        data.qvel[vadr : vadr + 3] = wv[:3] + np.cross(omega, T_twin[:3, 3] - w.data.xpos[world_body])
+        data.qvel[vadr + 3 : vadr + 6] = T_twin[:3, :3].T @ omega
+
+    def __call__(self, step: int, control: np.ndarray, model, data) -> bool:
+        if self.actuators is None:
+            self.actuators = self.session.planner.robot.actuators
+        self.world.execute(np.array([self.control_dt_s]), control[self.actuators][None])
+        if (step + 1) % self.period:
+            return False
+        w = self.world
+        for name in self.joint_names:
+            twin_joint, world_joint = model.joint(name), w.model.joint(name)
+            data.qpos[twin_joint.qposadr[0]] = w.data.qpos[world_joint.qposadr[0]]
+            data.qvel[twin_joint.dofadr[0]] = w.data.qvel[world_joint.dofadr[0]]
+        poses_now = w.object_poses()
+        for object_id, body_name in self.session.twin.body_names.items():
+            n = object_id - 1
+            T_twin = tracked_pose(self.poses_at_view[n], poses_now[n], self.objects[object_id].T_world_object)
+            self._set_object(model, data, body_name, int(w.object_ids[n]), T_twin)
+        self.observations += 1
+        return True
+
+
+def run_in_world(
+    session: ManipulationSession,
+    world,
+    objects: list[TwinObject],
+    table_height_m: float,
+    target_index: int,
+    task: str,
+    goal_displacement_m,
+    tolerance_m: float,
+    period_steps: int = 0,
+) -> WorldRun:
+    """Plan on `objects` and execute in `world` (a SimWorld of the true scene, robot at home);
+    period_steps 0 = open loop. Object id n is the world's object n - 1."""
+    from arm_sim import robot
+
+    body = world.object_ids[target_index]
+    start = world.data.xipos[body].copy()
+    session.set_objects(objects, table_height_m)
+    sync = WorldSync(session, world, objects, period_steps) if period_steps > 0 else None
+    outcome = session.request(
+        task,
+        target_index + 1,
+        goal_displacement_m,
+        tolerance_m,
+        robot.HOME_Q,
+        robot.GRIPPER_OPEN_M,
+        observe=sync,
+    )
+    if not outcome.planned:
+        return WorldRun(False, float("nan"), outcome)
+    result = outcome.result
+    if sync is None:
+        world.execute(result.times_s, result.joint_positions)
+    world.execute(np.array([HOLD_AFTER_S]), result.joint_positions[-1:])
+    met, error = task_outcome(task, start, world.data.xipos[body].copy(), goal_displacement_m, tolerance_m)
+    return WorldRun(met, error, outcome, sync.observations if sync else 0)
