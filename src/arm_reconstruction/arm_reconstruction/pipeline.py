@@ -21,6 +21,7 @@ from .grid import DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
 from .meshing import (
     DEFAULT_MIN_COMPONENT_VOXELS,
     DEFAULT_THRESHOLD,
+    add_missed_observed_voxels,
     empty_mesh,
     extrude_to_table,
     occupancy_mesh,
@@ -229,15 +230,23 @@ class Reconstructor:
         s = self.settings
         labels = np.asarray(labels)
         with self.timer("meshing"):
-            meshes = [
-                occupancy_mesh(p, frame, s.threshold, s.min_component_voxels, observed=g[0])
-                for p, frame, g in zip(probabilities, grids.frames, grids.grids, strict=True)
+            # What was seen of an object is part of it: observed voxels (F1) the network missed are
+            # added. Where it predicted nothing (a sliver of an object, mostly), the observed voxels
+            # alone stand in, all of their components kept.
+            from_observed = [
+                not (p > s.threshold).any() and bool(g[0].any())
+                for p, g in zip(probabilities, grids.grids, strict=True)
             ]
-            # Nothing above the threshold (a sliver of an object, mostly): its observed voxels stand in,
-            # so that the object still exists for the planner.
-            from_observed = [len(m.faces) == 0 and bool(g[0].any()) for m, g in zip(meshes, grids.grids, strict=True)]
-            for n in np.flatnonzero(from_observed):
-                meshes[n] = occupancy_mesh(grids.grids[n, 0], grids.frames[n], 0.5, 1)
+            meshes = [
+                occupancy_mesh(
+                    add_missed_observed_voxels(p, s.threshold, g[0]),
+                    frame,
+                    s.threshold,
+                    1 if alone else s.min_component_voxels,
+                    observed=g[0],
+                )
+                for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
+            ]
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
                 meshes, _ = remove_intersections(meshes)

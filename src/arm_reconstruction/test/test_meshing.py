@@ -4,6 +4,7 @@ import trimesh
 
 from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import (
+    add_missed_observed_voxels,
     drop_small_components,
     extrude_to_table,
     keep_observed_components,
@@ -111,6 +112,21 @@ def test_components_apart_from_the_observed_voxels_are_dropped():
     assert np.array_equal(keep_observed_components(probabilities, 0.5, far), probabilities), "none touch: unchanged"
     mesh = occupancy_mesh(probabilities, frame, observed=observed)
     assert len(mesh.split(only_watertight=False)) == 1 and mesh.bounds[1, 0] < 0.06
+
+
+def test_observed_voxels_the_network_missed_are_added_but_not_its_surface_noise():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[4:8, 4:8, 6:10] = 0.9  # the network kept the top of the object only
+    observed = np.zeros_like(probabilities)
+    observed[4, 4:8, 0:10] = 1.0  # the seen face runs down to the table
+    observed[3, 5, 7] = 1.0  # depth noise one voxel outside the predicted surface
+    added = add_missed_observed_voxels(probabilities, 0.5, observed)
+    assert added[4, 4:8, 0:5].min() == 1.0, "the missed lower part of the seen face is added"
+    assert added[3, 5, 7] == 0.0, "observed voxels next to the prediction are left to it"
+    assert np.array_equal(added[probabilities > 0], probabilities[probabilities > 0])
+    assert np.array_equal(add_missed_observed_voxels(probabilities, 0.5, np.zeros_like(observed)), probabilities)
+    mesh = occupancy_mesh(added, GridFrame(np.zeros(3), 0.01, 16, 0.0), observed=observed)
+    assert mesh.bounds[0, 2] < 0.005, "the mesh reaches down to the table"
 
 
 def test_intersections_are_cut_from_the_larger_mesh():
