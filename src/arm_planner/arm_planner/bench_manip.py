@@ -204,6 +204,7 @@ def main(argv=None) -> int:
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
     parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
     parser.add_argument("--rearrange-steps", type=int, default=300, help="rearrange step budget (0: --steps)")
+    parser.add_argument("--push-steps", type=int, default=300, help="push step budget (0: --steps)")
     parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
     parser.add_argument(
@@ -236,7 +237,8 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.close_steps = args.close_steps
-    config.task_steps = {"rearrange": args.rearrange_steps} if args.rearrange_steps else {}
+    budgets = {"rearrange": args.rearrange_steps, "push": args.push_steps}
+    config.task_steps = {task: steps for task, steps in budgets.items() if steps}
     period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
     done = load_done(log)
     settings = {
@@ -246,6 +248,7 @@ def main(argv=None) -> int:
         "tasks": args.tasks,
         "target_scale": args.target_scale,
         "steps": args.steps,
+        "task_steps": config.task_steps,
         "close_steps": args.close_steps,
         "twin_timestep_s": args.twin_timestep,
         "observe_period_s": args.observe_period,

@@ -49,8 +49,11 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
     config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
-    rearrange_steps = declare(node, "rearrange_steps", 300, "Step budget of rearrange (0: steps)", 0, 5000)
-    config.task_steps = {"rearrange": rearrange_steps} if rearrange_steps else {}
+    task_steps = {
+        task: declare(node, f"{task}_steps", 300, f"Step budget of {task} (0: steps)", 0, 5000)
+        for task in ("push", "rearrange")
+    }
+    config.task_steps = {task: steps for task, steps in task_steps.items() if steps}
     config.done_hold_steps = declare(node, "done_hold_steps", 10, "Stop once the goal held this many steps", 0, 1000)
     timestep = declare(node, "twin_timestep_s", 0.01, "Twin physics step, s (divides control_dt_s)", 0.001, 0.02)
     return config, timestep

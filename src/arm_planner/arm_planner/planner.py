@@ -74,8 +74,9 @@ class PlannerConfig:
     grasp_lift_goal_m: float = 0.10
     rearrange_carry_height_m: float = 0.04
     # Step budget per task (None: mppi.steps). Rearrange = grasp (75 closing steps) + a 28 cm carry,
-    # which does not fit the paper's 200 steps of 0.02 s.
-    task_steps: dict = field(default_factory=lambda: {"rearrange": 300})
+    # which does not fit the paper's 200 steps of 0.02 s; a push of 30 cm ending within 2.5 cm needs
+    # room to brake and correct after the approach.
+    task_steps: dict = field(default_factory=lambda: {"rearrange": 300, "push": 300})
     # Let resting objects sleep in the twin (no collision work until touched); see mppi.set_sleep.
     sleep_objects: bool = True
     # Physics time the twin is settled for (robot holding still) before planning.
@@ -186,7 +187,11 @@ class Planner:
                 **common, goal_displacement=displacement, close_steps=self.config.close_steps, carry_height_m=carry
             )
         elif request.task == TASK_PUSH:
-            reward = PushReward(**common, goal_displacement=displacement)
+            joint = int(self.model.body_jntadr[target_id])
+            velocity_adr = None
+            if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
+                velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
+            reward = PushReward(**common, goal_displacement=displacement, target_vel_adr=velocity_adr)
         else:
             raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
         if request.start_com_world is not None:

@@ -238,6 +238,18 @@ class PushReward(TaskReward):
     upright: float = 1.0
     engage_distance_m: float = 0.02
     disengage_distance_m: float = 0.06
+    # While pushing, the goal terms score the rest point, where the object would stop sliding on its
+    # own (x + v|v| / (2 mu g)), not where it is, so a push that would overshoot scores as one.
+    # target_vel_adr: index of the target's free-joint linear velocity in the state vector (None: off).
+    target_vel_adr: int | None = None
+    friction: float = 0.9
+    aim_beyond_m: float = 0.05
+    # Object speed above sqrt(2 a d), d the distance still to go, is penalised (m/s^2, per m/s).
+    braking_m_s2: float = 1.0
+    speed_weight: float = 5.0
+    # Within settled_m of the goal (rest point) the hand backs off to retreat_gap_m behind the object.
+    settled_m: float = 0.015
+    retreat_gap_m: float = 0.04
     state: str = "approaching"
 
     def __post_init__(self):
@@ -257,8 +269,11 @@ class PushReward(TaskReward):
         self.state = state
 
     def _direction(self, target_pos: np.ndarray) -> np.ndarray:
-        to_goal = self.goal[:2] - target_pos[..., :2]
-        return to_goal / (np.linalg.norm(to_goal, axis=-1, keepdims=True) + 1e-9)
+        """Push direction: towards a point aim_beyond_m past the goal along the commanded displacement,
+        which corrects sideways drift but does not swing round when the object is at the goal."""
+        nominal = self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
+        to_aim = self.goal[:2] + self.aim_beyond_m * nominal - target_pos[..., :2]
+        return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
 
     def _approach_axis(self, target_pos: np.ndarray) -> np.ndarray:
         direction = self._direction(target_pos) * np.sin(self.tilt_rad)
@@ -277,14 +292,22 @@ class PushReward(TaskReward):
         rel = self.geometry.vertices_world[:, :2] - self.geometry.com_world[:2]
         return np.max(directions @ rel.T, axis=-1)
 
+    def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""
+        if self.target_vel_adr is None:
+            return target_pos[..., :2], np.zeros(target_pos.shape[:-1])
+        velocity = states[..., self.target_vel_adr : self.target_vel_adr + 2]
+        speed = np.linalg.norm(velocity, axis=-1)
+        return target_pos[..., :2] + velocity * (speed / (2.0 * self.friction * 9.81))[..., None], speed
+
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
         target_pos, hands = self.rollout_poses(states, controls)
         pushing = self.state == "pushing"
-        gap = self.contact_gap_m
-        if pushing:  # press while far from the goal, back off to the surface when there
-            near = np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1) < 0.02
-            gap = np.where(near, self.contact_gap_m, self.push_gap_m)
+        rest, speed = self.rest_xy(states, target_pos)
+        to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
+        settled = to_go < self.settled_m
+        gap = np.where(settled, self.retreat_gap_m, self.push_gap_m if pushing else self.contact_gap_m)
         contact = self._contact_point(target_pos, gap)
         axis = self._approach_axis(target_pos)
 
@@ -298,9 +321,9 @@ class PushReward(TaskReward):
         reward = self.blend(hands, score)
         if pushing:
             tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
-            reward = reward - w.goal * self.push_goal_weight * np.linalg.norm(
-                self.goal[:2] - target_pos[..., :2], axis=-1
-            )
+            reward = reward - w.goal * self.push_goal_weight * to_go
+            braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)  # the speed the hand can still stop from
+            reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
             reward = reward - self.upright * tilt
         return reward
 

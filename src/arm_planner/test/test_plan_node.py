@@ -25,7 +25,8 @@ from arm_sim.ros_common import latched_qos
 @pytest.fixture(scope="module")
 def graph():
     rclpy.init()
-    node = PlanNode(parameter_overrides=[Parameter("steps", value=5), Parameter("settle_s", value=0.0)])
+    overrides = [Parameter("steps", value=5), Parameter("push_steps", value=0), Parameter("settle_s", value=0.0)]
+    node = PlanNode(parameter_overrides=overrides)
     client = Node("plan_node_test_client")
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)

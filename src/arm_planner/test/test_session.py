@@ -21,7 +21,7 @@ def _objects():
 
 @pytest.fixture(scope="module")
 def session():
-    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1))
+    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
     config.settle_s = 0.0
     s = ManipulationSession(config, 0.01)
     s.set_objects(_objects(), 0.0)
