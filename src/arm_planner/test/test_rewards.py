@@ -1,0 +1,41 @@
+import numpy as np
+
+from arm_planner.rewards import PushReward, RewardWeights, TargetGeometry
+
+GOAL = np.array([0.05, -0.30, 0.0])
+
+
+def _push(target_vel_adr=None) -> PushReward:
+    box = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, 0.06)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), box, 0.0)
+    return PushReward(
+        hand=None,
+        target=None,
+        geometry=geometry,
+        qpos_offset=0,
+        nq=0,
+        weights=RewardWeights(),
+        goal_displacement=GOAL,
+        target_vel_adr=target_vel_adr,
+    )
+
+
+def test_rest_point_adds_the_sliding_distance_of_the_objects_velocity():
+    reward = _push(target_vel_adr=0)
+    states = np.array([[0.5, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    rest, speed = reward.rest_xy(states, np.zeros((2, 3)))
+    np.testing.assert_allclose(rest[0], [0.25 / (2 * reward.friction * 9.81), 0.0])
+    np.testing.assert_allclose(rest[1], [0.0, 0.0])
+    np.testing.assert_allclose(speed, [0.5, 0.0])
+    still, _ = _push().rest_xy(states, np.zeros((2, 3)))
+    np.testing.assert_allclose(still, 0.0)
+
+
+def test_push_direction_does_not_swing_round_at_or_just_past_the_goal():
+    reward = _push()
+    nominal = GOAL[:2] / np.linalg.norm(GOAL[:2])
+    positions = np.array([[0.0, 0.0, 0.03], reward.goal, reward.goal + [0.01, -0.02, 0.0]])
+    directions = reward._direction(positions)
+    assert np.all(directions @ nominal > 0.8)
+    sideways = reward._direction(np.array([[0.05, 0.0, 0.03]]))[0]
+    assert np.cross(nominal, sideways) < 0, "a sideways drift is steered back"
