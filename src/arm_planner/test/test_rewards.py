@@ -38,4 +38,4 @@ def test_push_direction_does_not_swing_round_at_or_just_past_the_goal():
     directions = reward._direction(positions)
     assert np.all(directions @ nominal > 0.8)
     sideways = reward._direction(np.array([[0.05, 0.0, 0.03]]))[0]
-    assert np.cross(nominal, sideways) < 0, "a sideways drift is steered back"
+    assert nominal[0] * sideways[1] - nominal[1] * sideways[0] < 0, "a sideways drift is steered back"
