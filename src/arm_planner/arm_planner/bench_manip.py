@@ -216,6 +216,14 @@ def main(argv=None) -> int:
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
+    from arm_reconstruction.network import canonical_method
+
+    try:
+        args.methods = [
+            GROUND_TRUTH if m.replace("-", "_") == GROUND_TRUTH else canonical_method(m) for m in args.methods
+        ]
+    except ValueError as error:
+        parser.error(f"{error}, or {GROUND_TRUTH}")
 
     import torch
 

@@ -1,6 +1,7 @@
 """Occupancy probabilities -> simulation-ready world-frame meshes (paper Section 3.1, post-processing).
 
-Threshold, drop components apart from the observed voxels and specks, marching cubes (scikit-image)
+Add the observed voxels the network missed, threshold, drop components apart from the observed
+voxels and specks, marching cubes (scikit-image)
 on the zero-padded probability field (closed, watertight surfaces; the surface crosses the threshold
 between voxel centres), back to the world frame, then inter-object intersection removal that cuts
 from the larger mesh (manifold3d booleans). Also the inference-time method variants: ray carving and

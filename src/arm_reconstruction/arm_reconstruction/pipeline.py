@@ -2,8 +2,8 @@
 
 Stages (timed in Reconstructor.last_timings_s): four-channel grids of all objects (shared
 back-projection), one batched network pass, method post-processing (ray carving / extrusion),
-thresholding + marching cubes, inter-object intersection removal, convex decomposition and a
-visible-fraction estimate. Usable without ROS.
+observed voxels the network missed added, thresholding + marching cubes, inter-object intersection
+removal, convex decomposition and a visible-fraction estimate. Usable without ROS.
 """
 
 import pathlib
