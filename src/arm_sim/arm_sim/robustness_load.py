@@ -15,7 +15,8 @@ from arm_sim.robustness import NodeProcess, stamp_of, tracebacks
 GRAPH_ORDER = ("replay", "segmentation", "reconstruction", "planner")
 # Fast DDS 2.14's shared-memory transport can leave a port of a kill -9'd process locked, and a
 # process restarted in its place then matches its peers but receives nothing (eProsima/Fast-DDS
-# #5053, #5469). A respawned node therefore talks over UDP only.
+# #5053, #5469). A respawned node alone on UDP still missed its frames in about 1 of 4 fresh-clone
+# runs, so the whole graph talks over UDP only.
 RESPAWN_ENV = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 
 
@@ -28,15 +29,16 @@ def start_graph(
     replay_params: dict | None = None,
 ) -> dict[str, NodeProcess]:
     """The full graph fed by a looping camera bag (replayed at its own rate)."""
+    env = RESPAWN_ENV
     graph = {
         "segmentation": NodeProcess(
-            "segmentation", log_dir / "segmentation.log", params={"image_reliability": image_reliability}
+            "segmentation", log_dir / "segmentation.log", params={"image_reliability": image_reliability}, env=env
         ),
-        "reconstruction": NodeProcess("reconstruction", log_dir / "reconstruction.log", params=recon_params),
-        "planner": NodeProcess("planner", log_dir / "planner.log", params=planner_params or {}),
+        "reconstruction": NodeProcess("reconstruction", log_dir / "reconstruction.log", params=recon_params, env=env),
+        "planner": NodeProcess("planner", log_dir / "planner.log", params=planner_params or {}, env=env),
     }
     replay = {"loop": True, "wait_subscribers_s": 60.0, "linger_s": 0.0, **(replay_params or {})}
-    graph["replay"] = NodeProcess("replay", log_dir / "replay.log", args=(str(bag),), params=replay)
+    graph["replay"] = NodeProcess("replay", log_dir / "replay.log", args=(str(bag),), params=replay, env=env)
     return graph
 
 
