@@ -17,7 +17,7 @@ GRAPH_ORDER = ("replay", "segmentation", "reconstruction", "planner")
 # process restarted in its place then matches its peers but receives nothing (eProsima/Fast-DDS
 # #5053, #5469). A respawned node alone on UDP still missed its frames in about 1 of 4 fresh-clone
 # runs, so the whole graph talks over UDP only.
-RESPAWN_ENV = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+GRAPH_DDS_ENV = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 
 
 def start_graph(
@@ -29,16 +29,17 @@ def start_graph(
     replay_params: dict | None = None,
 ) -> dict[str, NodeProcess]:
     """The full graph fed by a looping camera bag (replayed at its own rate)."""
-    env = RESPAWN_ENV
+
+    def node(name: str, **kwargs) -> NodeProcess:
+        return NodeProcess(name, log_dir / f"{name}.log", env=GRAPH_DDS_ENV, **kwargs)
+
     graph = {
-        "segmentation": NodeProcess(
-            "segmentation", log_dir / "segmentation.log", params={"image_reliability": image_reliability}, env=env
-        ),
-        "reconstruction": NodeProcess("reconstruction", log_dir / "reconstruction.log", params=recon_params, env=env),
-        "planner": NodeProcess("planner", log_dir / "planner.log", params=planner_params or {}, env=env),
+        "segmentation": node("segmentation", params={"image_reliability": image_reliability}),
+        "reconstruction": node("reconstruction", params=recon_params),
+        "planner": node("planner", params=planner_params or {}),
     }
     replay = {"loop": True, "wait_subscribers_s": 60.0, "linger_s": 0.0, **(replay_params or {})}
-    graph["replay"] = NodeProcess("replay", log_dir / "replay.log", args=(str(bag),), params=replay, env=env)
+    graph["replay"] = node("replay", args=(str(bag),), params=replay)
     return graph
 
 
@@ -191,7 +192,7 @@ def run_fault(
     goal_timeout_s: float = 120.0,
 ) -> dict:
     """kill -9 the reconstruction node; during the outage the planner must keep the last meshes and
-    still plan on them; after a restart (log in restart_log, RESPAWN_ENV) new meshes must flow again."""
+    still plan on them; after a restart (log in restart_log, GRAPH_DDS_ENV) new meshes must flow again."""
     from rclpy.action import ActionClient
 
     from arm_interfaces.action import Manipulate
@@ -226,7 +227,7 @@ def run_fault(
     newest = watch.last_meshes()  # anything the killed node had in flight has arrived by now
     before_stamp = stamp_of(newest) if newest is not None else float("-inf")
     frames_at_restart = watch.totals()["segmentation"]
-    graph["reconstruction"] = NodeProcess("reconstruction", restart_log, params=recon_params, env=RESPAWN_ENV)
+    graph["reconstruction"] = NodeProcess("reconstruction", restart_log, params=recon_params, env=GRAPH_DDS_ENV)
     restarted_at = time.monotonic()
     resumed = probe.wait_until(
         lambda: (m := watch.last_meshes()) is not None and stamp_of(m) > before_stamp, resume_timeout_s, poll_s=0.2
