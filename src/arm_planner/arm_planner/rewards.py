@@ -30,11 +30,16 @@ GRASP_LIFT_M = 0.05
 
 @dataclass
 class TargetGeometry:
-    """The target in the twin at planning start, world frame."""
+    """The target in the twin at planning start, world frame; R_world_target is its body's rotation."""
 
     com_world: np.ndarray
     vertices_world: np.ndarray
     table_height_m: float
+    R_world_target: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def vertices_in_target(self) -> np.ndarray:
+        """Vertices relative to the centre of mass, in the target body's frame (metres)."""
+        return (self.vertices_world - self.com_world) @ np.asarray(self.R_world_target, dtype=np.float64)
 
     @property
     def top_z(self) -> float:
@@ -258,6 +263,7 @@ class PushReward(TaskReward):
         self.goal = g.com_world + self.goal_displacement
         height = g.top_z - g.bottom_z
         self.push_z = g.bottom_z + float(min(self.contact_height_m, 0.5 * height))
+        self._vertices_in_target = g.vertices_in_target()
 
     @property
     def gripper_closed(self) -> bool:
@@ -280,17 +286,21 @@ class PushReward(TaskReward):
         down = np.full(direction.shape[:-1] + (1,), -np.cos(self.tilt_rad))
         return np.concatenate([direction, down], axis=-1)
 
-    def _contact_point(self, target_pos: np.ndarray, gap_m: float | None = None) -> np.ndarray:
+    def _contact_point(self, target_pos: np.ndarray, target_rot: np.ndarray, gap_m=None) -> np.ndarray:
+        """The hand's target gap_m behind the object's surface, opposite the push direction, at the
+        object's pose (target_pos, target_rot): it turns with the object as the push turns it."""
         gap_m = self.contact_gap_m if gap_m is None else gap_m
         direction = self._direction(target_pos)
-        reach = self._support_batch(-direction)
+        reach = self._support_batch(-direction, target_rot)
         xy = target_pos[..., :2] - direction * (reach + np.asarray(gap_m))[..., None]
         z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
         return np.concatenate([xy, z[..., None]], axis=-1)
 
-    def _support_batch(self, directions: np.ndarray) -> np.ndarray:
-        rel = self.geometry.vertices_world[:, :2] - self.geometry.com_world[:2]
-        return np.max(directions @ rel.T, axis=-1)
+    def _support_batch(self, directions_xy: np.ndarray, target_rot: np.ndarray) -> np.ndarray:
+        """How far the rotated object reaches from its centre along each horizontal unit direction (m)."""
+        directions = np.concatenate([directions_xy, np.zeros(directions_xy.shape[:-1] + (1,))], axis=-1)
+        in_target = np.einsum("...ji,...j->...i", target_rot, directions)
+        return np.max(in_target @ self._vertices_in_target.T, axis=-1)
 
     def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""
@@ -308,7 +318,7 @@ class PushReward(TaskReward):
         to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
         settled = to_go < self.settled_m
         gap = np.where(settled, self.retreat_gap_m, self.push_gap_m if pushing else self.contact_gap_m)
-        contact = self._contact_point(target_pos, gap)
+        contact = self._contact_point(target_pos, self.target_rot, gap)
         axis = self._approach_axis(target_pos)
 
         def score(pos, rot):
@@ -328,8 +338,10 @@ class PushReward(TaskReward):
         return reward
 
     def update(self, state: np.ndarray) -> str:
-        hand_pos, _, target_pos = self.poses(state[None])
-        distance = float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos[0][None])[0]))
+        qpos = state[None, self.qpos_offset : self.qpos_offset + self.nq]
+        hand_pos, _ = self.hand(qpos)
+        target_pos, target_rot = self.target(qpos)
+        distance = float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
         self.step_count += 1
         if self.state == "approaching" and distance < self.engage_distance_m:
             self.state = "pushing"

@@ -201,7 +201,7 @@ class Twin:
             vertices = vertices[np.linspace(0, len(vertices) - 1, MAX_GEOMETRY_VERTICES).astype(int)]
         vertices_world = vertices @ T[:3, :3].T + T[:3, 3]
         com_world = T[:3, :3] @ body.ipos + T[:3, 3]
-        return TargetGeometry(com_world, vertices_world, self.table_height_m)
+        return TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
 
     def initial_state(
         self,

@@ -39,3 +39,17 @@ def test_push_direction_does_not_swing_round_at_or_just_past_the_goal():
     assert np.all(directions @ nominal > 0.8)
     sideways = reward._direction(np.array([[0.05, 0.0, 0.03]]))[0]
     assert nominal[0] * sideways[1] - nominal[1] * sideways[0] < 0, "a sideways drift is steered back"
+
+
+def test_push_contact_point_turns_with_the_object():
+    long_box = np.array([[x, y, z] for x in (-0.08, 0.08) for y in (-0.01, 0.01) for z in (0.0, 0.06)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), long_box, 0.0)
+    reward = PushReward(
+        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=np.array([0.3, 0.0, 0.0])
+    )
+    centre = geometry.com_world[None]
+    quarter_turn = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    as_built = reward._contact_point(centre, np.eye(3)[None], gap_m=0.0)[0]
+    turned = reward._contact_point(centre, quarter_turn, gap_m=0.0)[0]
+    np.testing.assert_allclose(as_built[:2], [-0.08, 0.0], atol=1e-9)
+    np.testing.assert_allclose(turned[:2], [-0.01, 0.0], atol=1e-9)

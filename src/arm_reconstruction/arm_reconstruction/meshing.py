@@ -67,13 +67,63 @@ def keep_observed_components(probabilities: np.ndarray, threshold: float, observ
     return np.where(occupied & ~touching[labels], np.float32(0.0), probabilities).astype(np.float32)
 
 
-def add_missed_observed_voxels(probabilities: np.ndarray, threshold: float, observed: np.ndarray) -> np.ndarray:
-    """Set to 1 the object's observed voxels (F1) farther than one voxel (26-neighbourhood) from the
-    predicted occupancy: what was seen of an object is part of it. Observed voxels next to the
-    prediction are left to it, so its surface is not thickened by depth noise."""
+def add_missed_observed_voxels(
+    probabilities: np.ndarray,
+    threshold: float,
+    observed: np.ndarray,
+    max_bridge_rounds: int = 4,
+    min_part_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS,
+) -> np.ndarray:
+    """Set to 1 the object's observed voxels (F1) that the predicted occupancy misses: what was seen of
+    an object is part of it. Observed voxels farther than one voxel (26-neighbourhood) from the
+    prediction are added. Those next to it are left to it, so its surface is not thickened by depth
+    noise, except where one joins two separate occupied parts (6-connected, of at least min_part_voxels
+    each), which a rigid object is not: up to max_bridge_rounds rounds of such bridges."""
     seen = np.asarray(observed) > 0
-    near_predicted = ndimage.binary_dilation(probabilities > threshold, structure=np.ones((3, 3, 3), bool))
-    return np.where(seen & ~near_predicted, np.float32(1.0), probabilities).astype(np.float32)
+    occupied = probabilities > threshold
+    cube, six = np.ones((3, 3, 3), bool), ndimage.generate_binary_structure(3, 1)
+    occupied = occupied | (seen & ~ndimage.binary_dilation(occupied, structure=cube))
+    candidates = seen & ~occupied
+    for _ in range(max_bridge_rounds):
+        labels, count = ndimage.label(occupied, structure=six)
+        if count < 2 or not candidates.any():
+            break
+        labels[np.bincount(labels.ravel())[labels] < min_part_voxels] = 0
+        highest = ndimage.maximum_filter(labels, footprint=six, mode="constant", cval=0)
+        lowest = ndimage.minimum_filter(
+            np.where(labels > 0, labels, count + 1), footprint=six, mode="constant", cval=count + 1
+        )
+        bridges = candidates & (highest > 0) & (lowest <= count) & (highest != lowest)
+        if not bridges.any():
+            break
+        occupied |= bridges
+        candidates &= ~bridges
+    return np.where(occupied & ~(probabilities > threshold), np.float32(1.0), probabilities).astype(np.float32)
+
+
+def rests_on_support(occupied: np.ndarray, other_observed: np.ndarray) -> bool:
+    """Whether an occupied grid [d, d, d] (+z up, layer 0 on the table) touches the table or rests on
+    another object's observed voxels (F2) directly below one of its voxels."""
+    occupied = np.asarray(occupied, bool)
+    if occupied[:, :, 0].any():
+        return True
+    return bool((occupied[:, :, 1:] & (np.asarray(other_observed)[:, :, :-1] > 0)).any())
+
+
+def support_from_below(probabilities: np.ndarray, threshold: float, grid: np.ndarray) -> np.ndarray:
+    """A scene at rest has no floating objects: when the occupancy above threshold rests on nothing
+    (rests_on_support), each of its columns is extended straight down through unobserved voxels (F4)
+    that no other object was seen in (F2), to the table or to whatever stops it. Seen-empty space
+    (F3) is never filled. Unchanged when the object is supported or empty."""
+    grid = np.asarray(grid)
+    occupied = probabilities > threshold
+    if not occupied.any() or rests_on_support(occupied, grid[1]):
+        return probabilities
+    fillable = (grid[3] > 0) & ~(grid[1] > 0)
+    filled = occupied.copy()
+    for z in range(occupied.shape[2] - 2, -1, -1):  # one layer at a time, top down
+        filled[:, :, z] |= filled[:, :, z + 1] & fillable[:, :, z]
+    return np.where(filled & ~occupied, np.float32(1.0), probabilities).astype(np.float32)
 
 
 def empty_mesh() -> trimesh.Trimesh:
@@ -85,22 +135,25 @@ def occupancy_mesh(
     frame: GridFrame,
     threshold: float = DEFAULT_THRESHOLD,
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS,
-    observed: np.ndarray | None = None,
+    grid: np.ndarray | None = None,
 ) -> trimesh.Trimesh:
     """World-frame watertight mesh of the voxels whose probability exceeds threshold (empty mesh when
     none do). The grid is zero-padded so that shapes touching the grid faces are closed there; the
     surface below the bottom layer's centres is flattened onto the table plane (grid z = 0), so that
-    a shape standing on the table rests on it with a flat base. observed [d, d, d]: the object's
-    observed voxels (grid channel F1); components apart from them are dropped."""
+    a shape standing on the table rests on it with a flat base. grid [4, d, d, d]: the object's
+    four-channel grid; components apart from its observed voxels (F1) are dropped, then what is
+    left is supported from below if it floats (support_from_below)."""
     if not 0.0 < threshold < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold}")
     probabilities = np.nan_to_num(np.asarray(probabilities, dtype=np.float32), nan=0.0)
     d = frame.resolution
     if probabilities.shape != (d, d, d):
         raise ValueError(f"probabilities shape {probabilities.shape} does not match the grid ({d},{d},{d})")
-    if observed is not None:
-        probabilities = keep_observed_components(probabilities, threshold, observed)
+    if grid is not None:
+        probabilities = keep_observed_components(probabilities, threshold, np.asarray(grid)[0])
     probabilities = drop_small_components(probabilities, threshold, min_component_voxels)
+    if grid is not None:
+        probabilities = support_from_below(probabilities, threshold, grid)
     if not (probabilities > threshold).any():
         return empty_mesh()
     padded = np.pad(probabilities, 1, constant_values=0.0)

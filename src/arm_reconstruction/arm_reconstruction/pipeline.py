@@ -243,7 +243,7 @@ class Reconstructor:
                     frame,
                     s.threshold,
                     1 if alone else s.min_component_voxels,
-                    observed=g[0],
+                    grid=g,
                 )
                 for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
             ]

@@ -11,6 +11,8 @@ from arm_reconstruction.meshing import (
     occupancy_mesh,
     ray_carve,
     remove_intersections,
+    rests_on_support,
+    support_from_below,
     to_manifold,
 )
 from arm_sim.objects import object_pool
@@ -110,7 +112,7 @@ def test_components_apart_from_the_observed_voxels_are_dropped():
     far = np.zeros_like(observed)
     far[8, 0, 12] = 1.0
     assert np.array_equal(keep_observed_components(probabilities, 0.5, far), probabilities), "none touch: unchanged"
-    mesh = occupancy_mesh(probabilities, frame, observed=observed)
+    mesh = occupancy_mesh(probabilities, frame, grid=np.stack([observed] + [np.zeros_like(observed)] * 3))
     assert len(mesh.split(only_watertight=False)) == 1 and mesh.bounds[1, 0] < 0.06
 
 
@@ -125,8 +127,43 @@ def test_observed_voxels_the_network_missed_are_added_but_not_its_surface_noise(
     assert added[3, 5, 7] == 0.0, "observed voxels next to the prediction are left to it"
     assert np.array_equal(added[probabilities > 0], probabilities[probabilities > 0])
     assert np.array_equal(add_missed_observed_voxels(probabilities, 0.5, np.zeros_like(observed)), probabilities)
-    mesh = occupancy_mesh(added, GridFrame(np.zeros(3), 0.01, 16, 0.0), observed=observed)
+    mesh = occupancy_mesh(
+        added, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=np.stack([observed] + [np.zeros_like(observed)] * 3)
+    )
     assert mesh.bounds[0, 2] < 0.005, "the mesh reaches down to the table"
+
+
+def test_an_observed_voxel_joining_two_predicted_parts_is_added():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[4:8, 4:8, 0:4] = 0.9  # base
+    probabilities[4:8, 4:8, 5:9] = 0.9  # top, one layer above it
+    observed = np.zeros_like(probabilities)
+    observed[5, 5, 4] = 1.0  # seen in the gap, next to both
+    observed[3, 5, 2] = 1.0  # seen beside the base only: surface noise
+    added = add_missed_observed_voxels(probabilities, 0.5, observed)
+    assert added[5, 5, 4] == 1.0 and added[3, 5, 2] == 0.0
+    grid = np.stack([observed] + [np.zeros_like(observed)] * 3)
+    mesh = occupancy_mesh(added, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid)
+    assert len(mesh.split(only_watertight=False)) == 1
+
+
+def test_a_floating_object_is_extended_down_through_unobserved_space_only():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[4:8, 4:8, 6:10] = 0.9  # the seen top of an object whose lower part is occluded
+    grid = np.zeros((4, 16, 16, 16), np.float32)
+    grid[3, :, :, :6] = 1.0  # unobserved below it
+    grid[3, 4, 4:8, :6] = 0.0
+    grid[2, 4, 4:8, :6] = 1.0  # ... except one column row seen to be empty
+    assert not rests_on_support(probabilities > 0.5, grid[1])
+    supported = support_from_below(probabilities, 0.5, grid)
+    assert supported[5:8, 4:8, 0:6].min() == 1.0 and supported[4, 4:8, 0:6].max() == 0.0
+    assert rests_on_support(supported > 0.5, grid[1])
+    assert np.array_equal(support_from_below(supported, 0.5, grid), supported), "supported: unchanged"
+    on_other = grid.copy()
+    on_other[1, 4:8, 4:8, 5] = 1.0  # another object seen right below it
+    assert np.array_equal(support_from_below(probabilities, 0.5, on_other), probabilities)
+    mesh = occupancy_mesh(probabilities, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid)
+    assert mesh.bounds[0, 2] < 0.001, "the mesh stands on the table"
 
 
 def test_intersections_are_cut_from_the_larger_mesh():
