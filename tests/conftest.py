@@ -1,15 +1,13 @@
-import os
-import random
-
 import pytest
 import rclpy
+
+from arm_sim.ros_common import use_private_domain
 
 
 @pytest.fixture(scope="session", autouse=True)
 def isolated_ros_domain():
     """Each test session talks on its own DDS domain so parallel runs never cross."""
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(100, 200)))
-    os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+    use_private_domain()
     yield
 
 

@@ -2,7 +2,6 @@
 
 import os
 import pathlib
-import random
 import signal
 import subprocess
 import time
@@ -10,8 +9,9 @@ import time
 import numpy as np
 import pytest
 
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(100, 200)))
-os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+from arm_sim.ros_common import use_private_domain
+
+use_private_domain()
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402

@@ -16,7 +16,6 @@ import argparse
 import json
 import os
 import pathlib
-import random
 import shutil
 import sys
 import tempfile
@@ -27,6 +26,7 @@ from tqdm import tqdm
 
 from arm_sim import robustness
 from arm_sim.robustness import ROOT, NodeProcess, Probe, node_built, render_frames, write_camera_bag
+from arm_sim.ros_common import use_private_domain
 
 PHASES = (
     "bad_input_segmentation",
@@ -367,8 +367,7 @@ def main(argv=None) -> int:
     parser.add_argument("--only", nargs="*", choices=PHASES, default=list(PHASES))
     parser.add_argument("--resume", action="store_true", help="keep phases already saved under <out>/phases")
     args = parser.parse_args(argv)
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(100, 200)))
-    os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+    use_private_domain()
     missing = [k for k in ("sim", "segmentation", "reconstruction", "planner", "replay") if not node_built(k)]
     if missing:
         print(f"[bench_robustness] not built: {missing} (colcon build)")

@@ -1,6 +1,8 @@
 """Node plumbing shared by every ARM node: QoS profiles, declared parameters, rate-limited error
 logs, diagnostics and a clean main loop. Imports rclpy: node modules only, never the cores."""
 
+import os
+import random
 import re
 import time
 
@@ -9,6 +11,15 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+
+def use_private_domain() -> int:
+    """Put this process and the nodes it starts on a random DDS domain, unless ROS_DOMAIN_ID is set,
+    talking over localhost only; returns the domain. Domains 1-101 only: their UDP ports lie below
+    Linux's ephemeral port range (32768-60999), where higher domains' ports can be taken."""
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 101)))
+    os.environ.setdefault("ROS_LOCALHOST_ONLY", "1")
+    return int(os.environ["ROS_DOMAIN_ID"])
 
 
 def sensor_qos(reliability: str = "best_effort", depth: int = 2) -> QoSProfile:
