@@ -55,7 +55,8 @@ def test_memory_growth_below_50_mb(run):
     """Steady-state growth (median of the last third of the samples minus the first third); single
     samples swing with the frame being processed."""
     growth = {k: v["trend_growth_mb"] for k, v in run["load"]["memory"].items()}
-    assert all(g is not None and g < 50.0 for g in growth.values()), run["load"]["memory"]
+    memory = run["load"]["memory"]
+    assert all(g is not None and g < 50.0 for g in growth.values()), f"trend growth (MB) {growth}, {memory}"
 
 
 def test_kill9_of_reconstruction_planner_keeps_meshes_and_pipeline_resumes(run):
