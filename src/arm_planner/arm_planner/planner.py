@@ -222,7 +222,7 @@ class Planner:
 
     def evaluate(self, reward, task: str, state: np.ndarray, tolerance_m: float):
         """(met, error_m) of the task at a twin state."""
-        _, _, com = reward.poses(state[None])
+        _, _, com, _ = reward.poses(state[None])
         com = com[0]
         if task == TASK_GRASP:
             lift = com[2] - reward.start_com[2]

@@ -56,14 +56,6 @@ class TargetGeometry:
         _, vecs = np.linalg.eigh(cov)
         return np.append(vecs[:, 0], 0.0)
 
-    def support_xy(self, direction_xy: np.ndarray) -> float:
-        """How far the object reaches from its centre of mass along a horizontal unit direction."""
-        d = np.asarray(direction_xy, dtype=np.float64)[:2]
-        return float(np.max((self.vertices_world[:, :2] - self.com_world[:2]) @ d))
-
-    def width_along(self, axis_xy: np.ndarray) -> float:
-        return self.support_xy(axis_xy) + self.support_xy(-np.asarray(axis_xy)[:2])
-
 
 @dataclass
 class RewardWeights:
@@ -109,10 +101,11 @@ class TaskReward:
     step_count: int = 0
 
     def poses(self, states: np.ndarray):
+        """(hand position, hand rotation, target centre, target rotation) per state, world frame."""
         qpos = states[..., self.qpos_offset : self.qpos_offset + self.nq]
         hand_pos, hand_rot = self.hand(qpos)
-        target_pos, _ = self.target(qpos)
-        return hand_pos, hand_rot, target_pos
+        target_pos, target_rot = self.target(qpos)
+        return hand_pos, hand_rot, target_pos, target_rot
 
     def rollout_poses(self, states: np.ndarray, controls: np.ndarray):
         """(target centre, hand poses): the simulated hand and, if blended, the commanded one."""
@@ -204,7 +197,7 @@ class GraspReward(TaskReward):
 
     def update(self, state: np.ndarray) -> str:
         """Advance the state machine on the executed state; returns the new state name."""
-        hand_pos, _, target_pos = self.poses(state[None])
+        hand_pos, _, target_pos, _ = self.poses(state[None])
         distance = float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.grasp_offset)))
         self._history.append(distance)
         self.step_count += 1
@@ -220,7 +213,7 @@ class GraspReward(TaskReward):
         return self.state
 
     def error(self, state: np.ndarray) -> float:
-        _, _, target_pos = self.poses(state[None])
+        _, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(self.goal - target_pos[0]))
 
 
@@ -338,9 +331,7 @@ class PushReward(TaskReward):
         return reward
 
     def update(self, state: np.ndarray) -> str:
-        qpos = state[None, self.qpos_offset : self.qpos_offset + self.nq]
-        hand_pos, _ = self.hand(qpos)
-        target_pos, target_rot = self.target(qpos)
+        hand_pos, _, target_pos, target_rot = self.poses(state[None])
         distance = float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
         self.step_count += 1
         if self.state == "approaching" and distance < self.engage_distance_m:
@@ -350,5 +341,5 @@ class PushReward(TaskReward):
         return self.state
 
     def error(self, state: np.ndarray) -> float:
-        _, _, target_pos = self.poses(state[None])
+        _, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(self.goal - target_pos[0]))

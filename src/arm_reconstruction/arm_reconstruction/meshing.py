@@ -1,7 +1,7 @@
 """Occupancy probabilities -> simulation-ready world-frame meshes (paper Section 3.1, post-processing).
 
 Add the observed voxels the network missed, threshold, drop components apart from the observed
-voxels and specks, marching cubes (scikit-image)
+voxels and specks, extend a floating result down to its support, marching cubes (scikit-image)
 on the zero-padded probability field (closed, watertight surfaces; the surface crosses the threshold
 between voxel centres), back to the world frame, then inter-object intersection removal that cuts
 from the larger mesh (manifold3d booleans). Also the inference-time method variants: ray carving and
@@ -113,13 +113,13 @@ def rests_on_support(occupied: np.ndarray, other_observed: np.ndarray) -> bool:
 def support_from_below(probabilities: np.ndarray, threshold: float, grid: np.ndarray) -> np.ndarray:
     """A scene at rest has no floating objects: when the occupancy above threshold rests on nothing
     (rests_on_support), each of its columns is extended straight down through unobserved voxels (F4)
-    that no other object was seen in (F2), to the table or to whatever stops it. Seen-empty space
-    (F3) is never filled. Unchanged when the object is supported or empty."""
+    to the table or to whatever stops it; seen voxels (F1-F3) are never filled. Unchanged when the
+    object is supported or empty."""
     grid = np.asarray(grid)
     occupied = probabilities > threshold
     if not occupied.any() or rests_on_support(occupied, grid[1]):
         return probabilities
-    fillable = (grid[3] > 0) & ~(grid[1] > 0)
+    fillable = grid[3] > 0
     filled = occupied.copy()
     for z in range(occupied.shape[2] - 2, -1, -1):  # one layer at a time, top down
         filled[:, :, z] |= filled[:, :, z + 1] & fillable[:, :, z]
