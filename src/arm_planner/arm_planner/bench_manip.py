@@ -9,13 +9,16 @@ takes the world's joint states and tracked object poses; see arm_planner.world_e
 loop as in the paper with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
-Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes.
+Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
+carries the run key (a digest of the settings, the shipped checkpoints and the source of the packages
+that produce the result); rows with another key are moved to episodes.stale.jsonl, never reused.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import pathlib
 import time
@@ -178,13 +181,40 @@ def _json_safe(value):
     return value
 
 
-def load_done(path: pathlib.Path) -> dict:
-    done = {}
+RESULT_PACKAGES = ("arm_planner", "arm_sim", "arm_reconstruction")
+
+
+def run_key(settings: dict) -> str:
+    """Digest of the settings, the checkpoints and the Python source of RESULT_PACKAGES."""
+    import importlib
+
+    digest = hashlib.sha1(json.dumps(settings, sort_keys=True).encode())
+    for name in RESULT_PACKAGES:
+        root = pathlib.Path(importlib.import_module(name).__file__).parent
+        for path in sorted(root.rglob("*")):
+            if path.suffix in (".py", ".pt") and path.is_file():
+                digest.update(path.relative_to(root).as_posix().encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def load_done(path: pathlib.Path, key: str) -> dict:
+    """(episode, method) -> row for the rows of run `key`; rows of other runs go to episodes.stale.jsonl."""
+    done, stale = {}, []
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
-                done[(row["episode"], row["method"])] = row
+                if row.get("run_key") == key:
+                    done[(row["episode"], row["method"])] = row
+                else:
+                    stale.append(line)
+    if stale:
+        stale_path = path.with_name("episodes.stale.jsonl")
+        with stale_path.open("a") as sink:
+            sink.write("\n".join(stale) + "\n")
+        path.write_text("".join(json.dumps(row) + "\n" for row in done.values()))
+        print(f"[bench_manip] {len(stale)} rows from another run (code or settings changed) moved to {stale_path}")
     return done
 
 
@@ -248,7 +278,6 @@ def main(argv=None) -> int:
     budgets = {"rearrange": args.rearrange_steps, "push": args.push_steps}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
     period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
-    done = load_done(log)
     settings = {
         "episodes": n,
         "seed": args.seed,
@@ -261,7 +290,10 @@ def main(argv=None) -> int:
         "twin_timestep_s": args.twin_timestep,
         "observe_period_s": args.observe_period,
         "objects": args.objects or "procedural heldout categories",
+        "nthread": args.nthread,
     }
+    key = run_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
+    done = load_done(log, key)
     progress = tqdm(
         total=n * len(args.methods),
         desc="bench_manip",
@@ -284,7 +316,7 @@ def main(argv=None) -> int:
                 }
             except RuntimeError as error:
                 for method in todo:
-                    row = base | {"method": method, "skipped": str(error), "success": False}
+                    row = base | {"method": method, "skipped": str(error), "success": False, "run_key": key}
                     sink.write(json.dumps(row) + "\n")
                     done[(episode.index, method)] = row
                     progress.update(1)
@@ -293,6 +325,7 @@ def main(argv=None) -> int:
                 row = base | run_method(
                     method, scene, target_index, frame, episode.task, config, args.twin_timestep, period_steps
                 )
+                row["run_key"] = key
                 sink.write(json.dumps(row) + "\n")
                 sink.flush()
                 done[(episode.index, method)] = row
@@ -301,7 +334,7 @@ def main(argv=None) -> int:
     progress.close()
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
     summary = summarise(rows, args.methods, args.tasks, BINS, n)
-    summary["settings"] = settings
+    summary["settings"] = settings | {"run_key": key}
     (out / "summary.json").write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)
     write_report(summary, out)

@@ -1,3 +1,4 @@
+import json
 import math
 
 import pytest
@@ -36,3 +37,21 @@ def test_summary_layout_and_excluded_rows():
     assert arm["by_task"] == {"grasp": 1.0, "push": 0.0}
     assert arm["by_visibility"]["1.0"] == 1.0 and math.isnan(arm["by_visibility"]["0.5-0.6"])
     assert summary["methods"]["baseline"]["unavailable"] == ["no checkpoint"]
+
+
+def test_results_of_another_run_are_never_reused(tmp_path):
+    from arm_planner.bench_manip import load_done, run_key
+
+    key, other = run_key({"steps": 200}), run_key({"steps": 300})
+    assert key != other and key == run_key({"steps": 200})
+    log = tmp_path / "episodes.jsonl"
+    rows = [
+        {"episode": 0, "method": "arm", "success": True, "run_key": key},
+        {"episode": 1, "method": "arm", "success": True, "run_key": other},
+        {"episode": 2, "method": "arm", "success": True},
+    ]
+    log.write_text("".join(json.dumps(row) + "\n" for row in rows))
+    done = load_done(log, key)
+    assert list(done) == [(0, "arm")]
+    assert len(log.read_text().splitlines()) == 1
+    assert len((tmp_path / "episodes.stale.jsonl").read_text().splitlines()) == 2
