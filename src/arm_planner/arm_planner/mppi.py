@@ -2,8 +2,8 @@
 
 Controls are absolute actuator targets (position actuators: joint targets). Each step samples
 `num_paths` control sequences of `horizon` control steps around a warm-started nominal sequence,
-rolls all of them out in one call of `mujoco.rollout.Rollout` (persistent C thread pool, no Python
-loop per physics step), scores them with a task reward and moves the nominal sequence to the
+rolls them out with `mujoco.rollout` (C loops over the physics steps, threads over the paths; see
+BatchedRollout), scores them with a task reward and moves the nominal sequence to the
 reward-weighted average. Noise is temporally smoothed (AR(1) along the horizon); every sampled
 sequence is clipped to the actuator ranges and to a per-step rate limit before rollout, so the
 weighted average (a convex combination) respects the same limits.
@@ -12,6 +12,7 @@ weighted average (a convex combination) respects the same limits.
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import mujoco
@@ -75,8 +76,11 @@ def set_sleep(model: mujoco.MjModel, trees: np.ndarray, start_asleep: bool) -> N
 class BatchedRollout:
     """Rolls out [N, H] control-step sequences; returns the state at the end of each control step.
 
-    With sleep enabled on the model, the per-thread data are reset before every batch so trees with
-    the INIT policy start asleep unless the initial state gives them a velocity.
+    With sleep enabled on the model, each path starts from freshly reset data, so trees with the
+    INIT policy start asleep unless the initial state gives them a velocity. (A rollout sets the
+    physics state but not the sleep state: paths sharing one thread's data in a single batched call
+    would inherit the trees an earlier path woke, and which paths share a thread depends on
+    scheduling, so results would vary from run to run.) Path p runs on data p % threads.
     """
 
     def __init__(self, model: mujoco.MjModel, control_dt_s: float, nthread: int = 2):
@@ -91,7 +95,9 @@ class BatchedRollout:
         self.nstate = mujoco.mj_stateSize(model, STATE_SPEC)
         self._buffers: dict[tuple[int, int], np.ndarray] = {}
         self._models: dict[int, list[mujoco.MjModel]] = {}
-        self._never_asleep = model.ntree - len(free_body_trees(model))
+        self._workers = ThreadPoolExecutor(len(self._datas)) if len(self._datas) > 1 else None
+        self._path_runners = [mujoco.rollout.Rollout(nthread=0) for _ in self._datas]
+        self._one_model = [model]
         for data in self._datas:
             mujoco.mj_resetData(model, data)
 
@@ -115,9 +121,8 @@ class BatchedRollout:
             self._buffers[(n, nstep)] = out
         init = np.ascontiguousarray(np.broadcast_to(initial_state, (n, self.nstate)), dtype=np.float64)
         if self.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP):
-            for data in self._datas:
-                if data.ntree_awake > self._never_asleep:  # an object woke in the last batch
-                    mujoco.mj_resetData(self.model, data)
+            self._rollout_paths_apart(init, ctrl, nstep, out)
+            return out[:, self.substeps - 1 :: self.substeps]
         models = self._models.get(n)
         if models is None:
             models = self._models[n] = [self.model] * n
@@ -133,6 +138,29 @@ class BatchedRollout:
         )
         return out[:, self.substeps - 1 :: self.substeps]
 
+    def _rollout_paths_apart(self, init: np.ndarray, ctrl: np.ndarray, nstep: int, out: np.ndarray) -> None:
+        """Each path on freshly reset data; path p on data p % threads (GIL released in the rollout)."""
+
+        def run(worker: int) -> None:
+            data, runner = self._datas[worker], self._path_runners[worker]
+            for p in range(worker, len(init), len(self._datas)):
+                mujoco.mj_resetData(self.model, data)
+                runner.rollout(
+                    self._one_model,
+                    [data],
+                    init[p : p + 1],
+                    ctrl[p : p + 1],
+                    control_spec=mujoco.mjtState.mjSTATE_CTRL,
+                    skip_checks=True,
+                    nstep=nstep,
+                    state=out[p : p + 1],
+                )
+
+        if self._workers is None:
+            run(0)
+        else:
+            list(self._workers.map(run, range(len(self._datas))))
+
     def reset_data(self) -> None:
         """Reset the per-thread data (re-applies the sleep policy: INIT trees start asleep)."""
         for data in self._datas:
@@ -140,6 +168,10 @@ class BatchedRollout:
 
     def close(self) -> None:
         self._runner.close()
+        for runner in self._path_runners:
+            runner.close()
+        if self._workers is not None:
+            self._workers.shutdown()
 
 
 @dataclass

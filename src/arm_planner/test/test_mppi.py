@@ -2,7 +2,16 @@ import mujoco
 import numpy as np
 from gantry import gantry_model
 
-from arm_planner.mppi import BatchedRollout, ControlLimits, Mppi, MppiConfig, get_state, state_layout
+from arm_planner.mppi import (
+    BatchedRollout,
+    ControlLimits,
+    Mppi,
+    MppiConfig,
+    free_body_trees,
+    get_state,
+    set_sleep,
+    state_layout,
+)
 
 
 def test_integrated_targets_respect_box_and_rate_limits():
@@ -115,3 +124,29 @@ def test_non_finite_returns_get_no_weight():
     assert result.weights[1] == 0 and np.isclose(result.weights.sum(), 1.0)
     assert np.all(np.isfinite(result.control))
     mppi.close()
+
+
+def test_with_sleep_each_path_is_independent_of_the_paths_before_it():
+    model = gantry_model()
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    hand_beside_object = {"gx": 0.09, "gz": -0.22}
+    for name, value in hand_beside_object.items():
+        data.qpos[model.joint(name).qposadr[0]] = value
+        data.ctrl[model.actuator("a" + name[1:]).id] = value
+    mujoco.mj_step(model, data, nstep=200)
+    set_sleep(model, free_body_trees(model), start_asleep=True)
+    data.qvel[:] = 0.0
+    data.qpos[model.jnt_qposadr[model.body("object_0").jntadr[0]] + 2] -= 0.001  # not at rest: awake, it moves
+    state = get_state(model, data)
+    push, stay = data.ctrl.copy(), data.ctrl.copy()
+    push[model.actuator("ax").id] += 0.1
+    controls = np.stack([np.broadcast_to(push, (5, model.nu)), np.broadcast_to(stay, (5, model.nu))])
+    object_x = state_layout(model)[0] + model.jnt_qposadr[model.body("object_0").jntadr[0]]
+    for nthread in (0, 2):
+        rollout = BatchedRollout(model, 0.02, nthread)
+        batch = rollout(state, controls, data.ctrl.copy()).copy()
+        assert batch[0, -1, object_x] - state[object_x] > 0.005  # the first path pushed the object
+        alone = rollout(state, controls[1:], data.ctrl.copy())
+        np.testing.assert_array_equal(batch[1], alone[0])
+        rollout.close()
