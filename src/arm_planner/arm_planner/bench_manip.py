@@ -182,6 +182,7 @@ def _json_safe(value):
 
 
 RESULT_PACKAGES = ("arm_planner", "arm_sim", "arm_reconstruction")
+REPORTING_ONLY = ("bench_stats.py",)  # statistics and plots of the rows, not the rows
 
 
 def run_key(settings: dict) -> str:
@@ -192,7 +193,7 @@ def run_key(settings: dict) -> str:
     for name in RESULT_PACKAGES:
         root = pathlib.Path(importlib.import_module(name).__file__).parent
         for path in sorted(root.rglob("*")):
-            if path.suffix in (".py", ".pt") and path.is_file():
+            if path.suffix in (".py", ".pt") and path.is_file() and path.name not in REPORTING_ONLY:
                 digest.update(path.relative_to(root).as_posix().encode())
                 digest.update(path.read_bytes())
     return digest.hexdigest()[:12]

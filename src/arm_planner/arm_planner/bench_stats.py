@@ -26,7 +26,8 @@ def wilson(successes: int, n: int, z: float = Z_90) -> tuple[float, float, float
     denominator = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denominator
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
-    return p, max(0.0, centre - half), min(1.0, centre + half)
+    # The interval contains p; at p = 0 or 1 rounding could put its end a hair past it.
+    return p, min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
 
 
 def _rate(rows) -> dict:

@@ -55,3 +55,9 @@ def test_results_of_another_run_are_never_reused(tmp_path):
     assert list(done) == [(0, "arm")]
     assert len(log.read_text().splitlines()) == 1
     assert len((tmp_path / "episodes.stale.jsonl").read_text().splitlines()) == 2
+
+
+def test_wilson_interval_contains_the_rate_at_the_ends():
+    for k, n in [(0, 1), (0, 7), (3, 3), (11, 11)]:
+        p, lo, hi = wilson(k, n)
+        assert lo <= p <= hi
