@@ -77,10 +77,10 @@ class BatchedRollout:
     """Rolls out [N, H] control-step sequences; returns the state at the end of each control step.
 
     With sleep enabled on the model, each path starts from freshly reset data, so trees with the
-    INIT policy start asleep unless the initial state gives them a velocity. (A rollout sets the
-    physics state but not the sleep state: paths sharing one thread's data in a single batched call
-    would inherit the trees an earlier path woke, and which paths share a thread depends on
-    scheduling, so results would vary from run to run.) Path p runs on data p % threads.
+    INIT policy start asleep (at qpos0) unless the initial state gives them a velocity, whatever ran
+    before on that data. Path p runs on data p % threads. (One batched call over per-thread data,
+    paths assigned to threads as the pool schedules them, gave different closed-loop outcomes from
+    run to run with 2 threads; the rollout sets the physics state, not the rest of the data.)
     """
 
     def __init__(self, model: mujoco.MjModel, control_dt_s: float, nthread: int = 2):
@@ -160,11 +160,6 @@ class BatchedRollout:
             run(0)
         else:
             list(self._workers.map(run, range(len(self._datas))))
-
-    def reset_data(self) -> None:
-        """Reset the per-thread data (re-applies the sleep policy: INIT trees start asleep)."""
-        for data in self._datas:
-            mujoco.mj_resetData(self.model, data)
 
     def close(self) -> None:
         self._runner.close()

@@ -156,11 +156,10 @@ class Planner:
 
     def _rest_objects_here(self, data: mujoco.MjData) -> None:
         """Objects at rest in `data` sleep there in the rollouts: MuJoCo initialises sleeping islands at
-        qpos0, so qpos0 takes their current poses and the rollout data are reset."""
+        qpos0, so qpos0 takes their current poses (every rollout path starts from reset data)."""
         if self.config.sleep_objects:
             self.model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
             self._stop_creeping(data)
-            self.mppi.rollout.reset_data()
         mujoco.mj_forward(self.model, data)
 
     def _reward(self, request: PlanRequest, geometry: TargetGeometry):
