@@ -87,6 +87,10 @@ def test_replayed_bag_reproduces_the_live_meshes(work_dir, recon_params):
         try:
             replay_store = probe_replay.record(ReconstructedObjectArray, "arm/meshes", latched_qos(depth=10))
             nodes = pipeline(work_dir / "replay", recon_params)
+            # The mesh publisher keeps only its last message for late subscribers: match it before
+            # the first frame, or a slow discovery hides that frame's meshes from this probe.
+            matched = probe_replay.wait_until(lambda: replay_store.subscription.get_publisher_count() > 0, 120.0)
+            assert matched, "the replay probe never matched the reconstruction node's publisher"
             replay = NodeProcess(
                 "replay",
                 work_dir / "replay" / "replay.log",

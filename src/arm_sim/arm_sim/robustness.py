@@ -252,7 +252,8 @@ class Probe:
 
     def record(self, msg_type, topic: str, qos=10, keep: int | None = None, on_message=None):
         """Messages received on topic, in a list (or a deque of the last `keep`), with their arrival
-        times (time.monotonic) in the parallel `.times` attribute and the running count in `.total`."""
+        times (time.monotonic) in the parallel `.times` attribute, the running count in `.total` and
+        the rclpy subscription in `.subscription`."""
         store = _Recorded(keep)
 
         def callback(msg):
@@ -263,7 +264,7 @@ class Probe:
             if on_message is not None:
                 on_message(msg)
 
-        self.node.create_subscription(msg_type, topic, callback, qos)
+        store.subscription = self.node.create_subscription(msg_type, topic, callback, qos)
         return store
 
     def watch_diagnostics(self, history: int = 2000) -> None:
@@ -341,6 +342,7 @@ class _Recorded(deque):
         super().__init__(maxlen=keep)
         self.times = deque(maxlen=keep)
         self.total = 0
+        self.subscription = None
 
 
 def stamp_of(msg) -> float:
