@@ -7,7 +7,9 @@ pipeline consumes them, and publish /clock (bag time) for nodes run with use_sim
 mode original: message i is published at start + (t_i - t_0) / rate (t = the bag's receive stamps).
 mode consumed: camera frames (messages of frame_topics sharing a header stamp) are published one
 after the other; the next frame waits until consumed_topic has published a message stamped at or
-after the previous frame (or consumed_timeout_s passed). Every frame is then processed once.
+after the previous frame (or consumed_timeout_s passed). Every frame is then processed once. Until
+a first frame has been consumed, the pending frame is sent again every first_frame_retry_s: a link
+inside the pipeline can match after the frame was sent.
 start_offset_s / duration_s replay a window of the bag (bag time). In mode consumed the replay
 first waits for a subscriber on every replayed topic and a publisher on consumed_topic (the end of
 the chain is up). With loop:=true the bag repeats; header stamps (and /clock) are shifted by one
@@ -84,6 +86,15 @@ class BagReplayer(Node):
         self.consumed_timeout_s = declare(
             self, "consumed_timeout_s", 60.0, "Longest wait for a frame to be consumed, seconds", 0.1, 3600.0
         )
+        self.first_frame_retry_s = declare(
+            self,
+            "first_frame_retry_s",
+            20.0,
+            "Mode consumed: re-publish the first frame this often until it is consumed (a link inside the "
+            "pipeline that matched after it was sent lost it), seconds; 0 = never",
+            0.0,
+            3600.0,
+        )
         self.wait_subscribers_s = declare(
             self, "wait_subscribers_s", 5.0, "Wait this long for subscribers before playing, seconds", 0.0, 600.0
         )
@@ -125,7 +136,8 @@ class BagReplayer(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.published = {t: 0 for t in self.topics}
         self.frames_published = self.frames_consumed = self.frames_timed_out = self.corrupt = 0
-        self.frames_incomplete = 0
+        self.frames_incomplete = self.frames_republished = 0
+        self._chain_proven = False  # a frame has been consumed: every link of the pipeline is matched
         self.passes = 0
         self._last_clock_wall = 0.0
         self.create_timer(1.0, self.publish_diagnostics)
@@ -143,8 +155,8 @@ class BagReplayer(Node):
             self._consumed_ns = max(self._consumed_ns, stamp)
             self._consumed.notify_all()
 
-    def wait_consumed(self, stamp_ns: int) -> bool:
-        deadline = time.monotonic() + self.consumed_timeout_s
+    def wait_consumed(self, stamp_ns: int, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
         with self._consumed:
             while self._consumed_ns < stamp_ns and rclpy.ok(context=self.context):
                 remaining = deadline - time.monotonic()
@@ -186,7 +198,7 @@ class BagReplayer(Node):
         stamps = LoopStamps()
         frame_topics = self.frame_topics & set(self.topics)
         groups = FrameGroups(frame_topics)
-        pending_ns = None  # header stamp of the last frame published in mode consumed
+        pending_ns, pending = None, []  # header stamp and messages of the last frame published in mode consumed
         while rclpy.ok(context=self.context):
             offset_ns = stamps.offset_ns(self.passes)
             start_wall, first_ns = time.monotonic(), None
@@ -216,10 +228,10 @@ class BagReplayer(Node):
                     continue
                 for frame_ns, frame in groups.add(message.topic, stamp, msg, bag_ns):
                     if pending_ns is not None:
-                        self._finish_frame(pending_ns)
+                        self._finish_frame(pending_ns, pending)
                     for topic, frame_msg, frame_bag_ns in frame:
                         self._publish(topic, frame_msg, frame_bag_ns)
-                    pending_ns = frame_ns
+                    pending_ns, pending = frame_ns, frame
                     self.frames_published += 1
             self.passes += 1
             if not self.loop or (self.max_loops and self.passes >= self.max_loops):
@@ -227,7 +239,7 @@ class BagReplayer(Node):
             if self.mode == "original" and not self._sleep_until(start_wall + stamps.period_ns() * 1e-9 / self.rate):
                 return  # the next pass starts one bag period (span + one step) after this one
         if pending_ns is not None:
-            self._finish_frame(pending_ns)
+            self._finish_frame(pending_ns, pending)
         self.frames_incomplete = groups.dropped + len(groups.pending)
         self._sleep_until(time.monotonic() + self.linger_s)
 
@@ -236,10 +248,24 @@ class BagReplayer(Node):
         self.publishers_by_topic[topic].publish(msg)
         self.published[topic] += 1
 
-    def _finish_frame(self, stamp_ns: int) -> None:
-        if self.wait_consumed(stamp_ns):
-            self.frames_consumed += 1
-        elif rclpy.ok(context=self.context):
+    def _finish_frame(self, stamp_ns: int, frame: list) -> None:
+        """Wait until the frame is consumed; until some frame has been, re-publish it every
+        first_frame_retry_s (discovery may match a link inside the pipeline after the send)."""
+        deadline = time.monotonic() + self.consumed_timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            retry = not self._chain_proven and self.first_frame_retry_s > 0
+            if self.wait_consumed(stamp_ns, min(remaining, self.first_frame_retry_s) if retry else remaining):
+                self.frames_consumed += 1
+                self._chain_proven = True
+                return
+            if not retry or deadline - time.monotonic() <= 0 or not rclpy.ok(context=self.context):
+                break
+            self.get_logger().warning(f"frame at {stamp_ns * 1e-9:.3f} s not consumed yet: publishing it again")
+            self.frames_republished += 1
+            for topic, frame_msg, frame_bag_ns in frame:
+                self._publish(topic, frame_msg, frame_bag_ns)
+        if rclpy.ok(context=self.context):
             self.frames_timed_out += 1
             self.errors.error(
                 "not_consumed", f"frame at {stamp_ns * 1e-9:.3f} s not consumed within {self.consumed_timeout_s} s"
@@ -252,6 +278,7 @@ class BagReplayer(Node):
             "frames_consumed": self.frames_consumed,
             "frames_timed_out": self.frames_timed_out,
             "frames_incomplete": self.frames_incomplete,
+            "frames_republished": self.frames_republished,
             "corrupt_messages_skipped": self.corrupt,
             "passes": self.passes,
         }
@@ -262,7 +289,7 @@ class BagReplayer(Node):
         text = f"[replay] published {sum(self.published.values())} messages in {self.passes} pass(es) ({counts})"
         if self.mode == "consumed":
             text += f"; frames consumed {self.frames_consumed}, timed out {self.frames_timed_out}"
-            text += f", incomplete (not published) {self.frames_incomplete}"
+            text += f", incomplete (not published) {self.frames_incomplete}, republished {self.frames_republished}"
         if self.corrupt:
             text += f"; {self.corrupt} corrupt message(s) skipped"
         return text
