@@ -257,6 +257,13 @@ class PushReward(TaskReward):
         height = g.top_z - g.bottom_z
         self.push_z = g.bottom_z + float(min(self.contact_height_m, 0.5 * height))
         self._vertices_in_target = g.vertices_in_target()
+        # The finger leans into the push, so a part of the object at height z above the contact
+        # height meets the finger tan(tilt) (z - contact height) later than one at the contact height:
+        # the contact point is the first point of the object that the leaning finger meets, not the
+        # object's widest part (an overhanging top would put the fingertip in the air beside a thin
+        # base and the finger against the top, which tips the object over).
+        above = np.maximum(g.vertices_world[:, 2] - self.push_z, 0.0)
+        self._lean_setback = above * np.tan(self.tilt_rad)
 
     @property
     def gripper_closed(self) -> bool:
@@ -293,7 +300,7 @@ class PushReward(TaskReward):
         """How far the rotated object reaches from its centre along each horizontal unit direction (m)."""
         directions = np.concatenate([directions_xy, np.zeros(directions_xy.shape[:-1] + (1,))], axis=-1)
         in_target = np.einsum("...ji,...j->...i", target_rot, directions)
-        return np.max(in_target @ self._vertices_in_target.T, axis=-1)
+        return np.max(in_target @ self._vertices_in_target.T - self._lean_setback, axis=-1)
 
     def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""

@@ -53,3 +53,18 @@ def test_push_contact_point_turns_with_the_object():
     turned = reward._contact_point(centre, quarter_turn, gap_m=0.0)[0]
     np.testing.assert_allclose(as_built[:2], [-0.08, 0.0], atol=1e-9)
     np.testing.assert_allclose(turned[:2], [-0.01, 0.0], atol=1e-9)
+
+
+def test_push_contact_point_is_where_the_leaning_finger_first_meets_the_object():
+    """A T standing on its stem: the fingertip goes to the stem, not into the air under the bar's
+    overhang; a part of the object high up meets the leaning finger later than one at its base."""
+    stem = [[x, y, z] for x in (-0.01, 0.01) for y in (-0.02, 0.02) for z in (0.0, 0.05)]
+    bar = [[x, y, z] for x in (-0.05, 0.05) for y in (-0.02, 0.02) for z in (0.05, 0.07)]
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.04]), np.array(stem + bar), 0.0)
+    reward = PushReward(
+        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=np.array([0.3, 0.0, 0.0])
+    )
+    contact = reward._contact_point(geometry.com_world[None], np.eye(3)[None], gap_m=0.0)[0]
+    setback = (0.05 - reward.push_z) * np.tan(reward.tilt_rad)
+    assert contact[0] < -0.01 - 1e-9, "no closer than the stem"
+    np.testing.assert_allclose(contact[0], -max(0.01, 0.05 - setback), atol=1e-9)
