@@ -77,12 +77,15 @@ def add_missed_observed_voxels(
     """Set to 1 the object's observed voxels (F1) that the predicted occupancy misses: what was seen of
     an object is part of it. Observed voxels farther than one voxel (26-neighbourhood) from the
     prediction are added. Those next to it are left to it, so its surface is not thickened by depth
-    noise, except where one joins two separate occupied parts (6-connected, of at least min_part_voxels
-    each), which a rigid object is not: up to max_bridge_rounds rounds of such bridges."""
+    noise, except in the bottom layer (grid z = 0), where what was seen is the object's footprint on
+    the table (the base of a stemmed glass, next to its one-voxel stem), and where one joins two
+    separate occupied parts (6-connected, of at least min_part_voxels each), which a rigid object is
+    not: up to max_bridge_rounds rounds of such bridges."""
     seen = np.asarray(observed) > 0
     occupied = probabilities > threshold
     cube, six = np.ones((3, 3, 3), bool), ndimage.generate_binary_structure(3, 1)
     occupied = occupied | (seen & ~ndimage.binary_dilation(occupied, structure=cube))
+    occupied[:, :, 0] |= seen[:, :, 0]
     candidates = seen & ~occupied
     for _ in range(max_bridge_rounds):
         labels, count = ndimage.label(occupied, structure=six)

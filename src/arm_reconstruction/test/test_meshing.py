@@ -147,6 +147,23 @@ def test_an_observed_voxel_joining_two_predicted_parts_is_added():
     assert len(mesh.split(only_watertight=False)) == 1
 
 
+def test_the_seen_footprint_next_to_a_thin_stem_is_added_and_the_object_stands():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[7, 7, 0:8] = 0.9  # one-voxel stem
+    probabilities[5:10, 5:10, 8:12] = 0.9  # bowl
+    observed = np.zeros_like(probabilities)
+    observed[6:9, 6:9, 0] = 1.0  # the base disk, seen on the table around the stem
+    observed[6, 7, 3] = 1.0  # seen beside the stem above the table: surface noise
+    added = add_missed_observed_voxels(probabilities, 0.5, observed)
+    assert added[6:9, 6:9, 0].min() > 0.5, "the footprint on the table is the object's"
+    assert added[6, 7, 3] == 0.0
+    grid = np.stack([observed] + [np.zeros_like(observed)] * 3)
+    mesh = occupancy_mesh(added, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid)
+    footprint = mesh.vertices[mesh.vertices[:, 2] < 1e-6, :2]
+    assert np.ptp(footprint, axis=0).min() >= 0.02, "a base three voxels wide, not a point"
+    assert np.all(footprint.min(0) < mesh.center_mass[:2]) and np.all(mesh.center_mass[:2] < footprint.max(0))
+
+
 def test_a_floating_object_is_extended_down_through_unobserved_space_only():
     probabilities = np.zeros((16, 16, 16), np.float32)
     probabilities[4:8, 4:8, 6:10] = 0.9  # the seen top of an object whose lower part is occluded
