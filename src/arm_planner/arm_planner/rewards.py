@@ -147,7 +147,7 @@ class GraspReward(TaskReward):
     carry_height_m: float = 0.0
     _history: list = field(default_factory=list)
     _closing_since: int = -1
-    _grasp_offset: np.ndarray | None = None
+    _closing_hand_pos: np.ndarray | None = None
 
     def __post_init__(self):
         g = self.geometry
@@ -181,6 +181,10 @@ class GraspReward(TaskReward):
         w = self.weights
         target_pos, hands = self.rollout_poses(states, controls)
         grasp_point = target_pos + self.grasp_offset
+        if self.state == "grasping" and self._closing_hand_pos is not None:
+            # The hand holds where the fingers began to close: chasing an object that a finger nudges
+            # drags it away (and tips it) before the grip forms.
+            grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
         if self.state == "grasped":
             reach = self.blend(hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1))
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
@@ -208,8 +212,12 @@ class GraspReward(TaskReward):
             if not still_ungrasped and distance <= self.max_close_distance_m:
                 self.state = "grasping"
                 self._closing_since = n
-        elif self.state == "grasping" and self.step_count - self._closing_since >= self.close_steps:
-            self.state = "grasped"
+                self._closing_hand_pos = hand_pos[0].copy()
+        elif self.state == "grasping":
+            if self._closing_hand_pos is None:  # resumed mid-close
+                self._closing_hand_pos = hand_pos[0].copy()
+            if self.step_count - self._closing_since >= self.close_steps:
+                self.state = "grasped"
         return self.state
 
     def error(self, state: np.ndarray) -> float:

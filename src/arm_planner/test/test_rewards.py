@@ -1,6 +1,6 @@
 import numpy as np
 
-from arm_planner.rewards import PushReward, RewardWeights, TargetGeometry
+from arm_planner.rewards import GraspReward, PushReward, RewardWeights, TargetGeometry
 
 GOAL = np.array([0.05, -0.30, 0.0])
 
@@ -68,3 +68,29 @@ def test_push_contact_point_is_where_the_leaning_finger_first_meets_the_object()
     setback = (0.05 - reward.push_z) * np.tan(reward.tilt_rad)
     assert contact[0] < -0.01 - 1e-9, "no closer than the stem"
     np.testing.assert_allclose(contact[0], -max(0.01, 0.05 - setback), atol=1e-9)
+
+
+def _poses_from(first: int):
+    """Kinematics stand-in: position = qpos[..., first:first + 3], rotation = hand pointing down."""
+    down = np.diag([1.0, -1.0, -1.0])
+    return lambda qpos: (qpos[..., first : first + 3], np.broadcast_to(down, qpos.shape[:-1] + (3, 3)))
+
+
+def test_the_hand_holds_still_while_the_fingers_close_on_a_nudged_object():
+    box = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, 0.08)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.04]), box, 0.0)
+    reward = GraspReward(hand=_poses_from(0), target=_poses_from(3), geometry=geometry, qpos_offset=0, nq=6)
+    at_rest = np.concatenate([reward.grasp_point, geometry.com_world])
+    while reward.state == "ungrasped":
+        reward.update(at_rest)
+        assert reward.step_count < 50
+    nudged = geometry.com_world + [0.03, 0.0, 0.0]
+    holding = np.concatenate([reward.grasp_point, nudged])
+    chasing = np.concatenate([nudged + reward.grasp_offset, nudged])
+    scores = reward(np.stack([holding, chasing]), np.zeros((2, 0)))
+    assert scores[0] > scores[1], "closing, the hand stays where the fingers began to close"
+    for _ in range(reward.close_steps):
+        reward.update(holding)
+    assert reward.state == "grasped"
+    scores = reward(np.stack([holding, chasing]), np.zeros((2, 0)))
+    assert scores[1] > scores[0], "grasped, the hand goes with the object again"
