@@ -153,7 +153,6 @@ class ReconstructionNode(Node):
         if not self._publish(self.pub_objects, objects_to_msg(objects, header, table_height_m)):
             return
         self._publish(self.pub_markers, markers_msg(objects, header, self.marker_alpha))
-        self.processed += 1
         failed = [o for o in objects if not o.ok]
         for obj in failed:
             self.errors.error(f"object {obj.id}", f"object {obj.id} not reconstructed: {obj.error}")
@@ -169,6 +168,7 @@ class ReconstructionNode(Node):
             failed_objects=len(failed),
         )
         level = DiagnosticStatus.WARN if failed else DiagnosticStatus.OK
+        self.processed += 1  # after the timings above, so a status counting this frame carries them
         self._update_diagnostics(values, level, f"{len(failed)} object(s) not reconstructed" if failed else "ok")
 
     def _reject(self, cause: str, message: str) -> None:
