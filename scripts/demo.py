@@ -146,7 +146,13 @@ def main() -> int:
         graph.start("sim", "-p", f"seed:={args.seed}", "-p", f"n_objects:={args.objects}")
         stages = [k for k in ("segmentation", "reconstruction", "planner") if node_available(k)]
         for key in stages:
-            extra = ["-p", "use_ground_truth_masks:=true"] if key == "segmentation" and args.ground_truth_masks else []
+            extra = []
+            if key == "segmentation":
+                # sim and segmentation share this machine: reliable delivery, so a loaded CPU does not
+                # drop every fragmented depth image (the node still keeps only the latest frame)
+                extra = ["-p", "image_reliability:=reliable"]
+                if args.ground_truth_masks:
+                    extra += ["-p", "use_ground_truth_masks:=true"]
             if key == "reconstruction" and args.method:
                 extra = ["-p", f"method:={args.method}"]
             graph.start(key, *extra)
@@ -238,6 +244,7 @@ def main() -> int:
                 plt.close(fig)
 
         rclpy.spin_once(node, timeout_sec=0.5)
+        summary["failed_stage"] = first_silent_stage(stages, seg_labels, meshes, summary.get("task"))
         summary["latency"] = observer.diagnostics
         summary["alive_at_end"] = graph.alive()
     summary["wall_s"] = round(time.monotonic() - t_start, 1)
@@ -246,7 +253,16 @@ def main() -> int:
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(json.dumps(summary, indent=2))
     print(f"[demo] wrote {out}")
+    if summary["failed_stage"]:
+        print(f"[demo] FAILED: {summary['failed_stage']} produced no output (logs in log/demo)", file=sys.stderr)
+        return 1
     return 0 if all(summary["alive_at_end"].values()) else 1
+
+
+def first_silent_stage(stages, seg_labels, meshes, task) -> str | None:
+    """The first running stage whose output never reached the demo (None when all did)."""
+    outputs = {"segmentation": seg_labels, "reconstruction": meshes, "planner": task}
+    return next((key for key in stages if outputs[key] is None), None)
 
 
 def run_task(node, observer, meshes, truth, task: str) -> dict:

@@ -233,6 +233,7 @@ def run_fault(
         lambda: (m := watch.last_meshes()) is not None and stamp_of(m) > before_stamp, resume_timeout_s, poll_s=0.2
     )
     restarted = probe.diagnostic("reconstruction_node")
+    segmented_at = [t for t, _ in watch.lags["segmentation"]]
     return {
         "killed_exit_code": killed_code,
         "outage_s": round(restarted_at - killed_at, 1),
@@ -246,5 +247,21 @@ def run_fault(
         "segmented_frames_after_restart": watch.totals()["segmentation"] - frames_at_restart,
         "restarted_node_diagnostics": {k: restarted.get(k) for k in ("frames_received", "frames_processed")},
         "restarted_log_tail": "" if resumed else graph["reconstruction"].log()[-2000:],
+        "last_segmented_frame_s_after_kill": round(segmented_at[-1] - killed_at, 1) if segmented_at else None,
+        "restart_s_after_kill": round(restarted_at - killed_at, 1),
+        "fresh_reader": None if resumed else frames_to_a_fresh_reader(probe, 10.0),
         "alive_after": {k: p.alive() for k, p in graph.items()},
     }
+
+
+def frames_to_a_fresh_reader(probe, duration_s: float) -> dict:
+    """Segmented frames a newly created subscription receives in duration_s, and how many the
+    segmentation node says it published meanwhile: tells a wedged publisher from a wedged reader."""
+    from arm_interfaces.msg import SegmentedFrame
+
+    published_before = probe.diagnostic_number("segmentation_node", "frames_published", 0)
+    fresh = probe.record(SegmentedFrame, "arm/segmented_frame", 10, keep=1)
+    probe.wait_until(lambda: False, duration_s)
+    published = probe.diagnostic_number("segmentation_node", "frames_published", 0) - published_before
+    with probe.lock:
+        return {"received": fresh.total, "published": int(published), "seconds": duration_s}
