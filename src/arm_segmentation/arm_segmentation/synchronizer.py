@@ -3,7 +3,9 @@
 Each input keeps a short queue of (stamp, item). After every arrival the synchronizer looks for
 the newest set that has one item per input with all stamps within `slop_s` of each other; when it
 finds one it returns it and forgets that set and everything older, so a consumer only ever sees
-the latest complete frame and memory stays bounded.
+the latest complete frame and memory stays bounded. Items older than the last emitted set are
+dropped as stale; a set sent again with the same stamps (a bag replay re-sending a frame that was
+not consumed downstream) is emitted again.
 """
 
 from collections import deque
@@ -48,7 +50,7 @@ class ApproximateTimeSynchronizer:
         stamp_s = float(stamp_s)
         self.stats.received += 1
         self.stats.per_input[index] += 1
-        if not stamp_s > self._last_emitted[index]:
+        if stamp_s < self._last_emitted[index]:
             self.stats.dropped_stale += 1
             return None
         queue = self._queues[index]

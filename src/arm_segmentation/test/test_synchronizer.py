@@ -32,6 +32,15 @@ def test_emits_the_newest_complete_set_and_drops_older_items():
     assert sync.stats.emitted == 1
 
 
+def test_a_frame_sent_again_with_the_same_stamps_is_emitted_again():
+    sync = ApproximateTimeSynchronizer(2, slop_s=0.001)
+    sync.add(0, 3.0, "rgb3")
+    assert sync.add(1, 3.0, "depth3")[1] == ["rgb3", "depth3"]
+    sync.add(0, 3.0, "rgb3 again")
+    assert sync.add(1, 3.0, "depth3 again")[1] == ["rgb3 again", "depth3 again"]
+    assert sync.stats.emitted == 2 and sync.stats.dropped_stale == 0
+
+
 def test_out_of_order_arrivals_are_matched():
     sync = ApproximateTimeSynchronizer(2, slop_s=0.001)
     sync.add(0, 2.0, "a2")
