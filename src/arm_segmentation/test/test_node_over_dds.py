@@ -125,8 +125,12 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
                 if "segmentation_node" in s.name
             ]
 
-        def rejected(count):
-            return lambda: any(d.get("frames_rejected") == str(count) for d in diagnostics())
+        def rejected_because(reason):
+            # a frame sent again is processed again, so the status message, not the count, tells
+            # which bad frame was rejected
+            return lambda: any(
+                reason in s.message for d in got["diag"] for s in d.status if "segmentation_node" in s.name
+            )
 
         def deliver(msgs, done, tries=3):
             # subscriptions keep only the latest message (latest-frame processing): resend if one was replaced
@@ -139,19 +143,17 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
         labels = gt if ground_truth else None
         bad = frame_messages(1.0, rgb, depth, K, labels)
         bad[0] = numpy_to_image(rgb[:-4], "rgb8", bad[0].header)  # rgb smaller than depth
-        assert deliver(bad, rejected(1)), diagnostics()
+        assert deliver(bad, rejected_because("but depth is")), diagnostics()
         odd = frame_messages(2.0, rgb, depth, K, labels)
         odd[1].encoding = "64FC1"  # unknown depth encoding
-        assert deliver(odd, rejected(2)), diagnostics()
+        assert deliver(odd, rejected_because("depth encoding '64FC1' not supported")), diagnostics()
         unsynced = frame_messages(3.0, rgb, depth, K, labels)
         unsynced[3].header.stamp.sec = 9  # pose 6 s away from the images: never matched
         send(unsynced, 0.05)
         spin_until(probe, lambda: False, 1.0)
         assert got["frames"] == [] and got["overlay"] == []
 
-        assert deliver(
-            frame_messages(10.0, rgb, depth, K, labels), lambda: len(got["frames"]) == 1 and len(got["overlay"]) == 1
-        )
+        assert deliver(frame_messages(10.0, rgb, depth, K, labels), lambda: got["frames"] and got["overlay"])
         frame = got["frames"][0]
         assert frame.header.stamp.sec == 10 and frame.world_frame_id == "world"
         predicted = image_to_numpy(frame.labels)
@@ -159,7 +161,7 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
             assert np.array_equal(predicted, gt)
         else:
             assert segmentation_metrics(predicted, gt)["overlap_f"] > 0.9
-        assert spin_until(probe, lambda: any(d.get("frames_published") == "1" for d in diagnostics()), 5.0)
+        assert spin_until(probe, lambda: any(int(d.get("frames_published", 0)) >= 1 for d in diagnostics()), 5.0)
     finally:
         code, output = stop(node)
     assert code == 0, output
