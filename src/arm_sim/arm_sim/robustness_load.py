@@ -248,7 +248,6 @@ def run_fault(
         "restarted_node_diagnostics": {k: restarted.get(k) for k in ("frames_received", "frames_processed")},
         "restarted_log_tail": "" if resumed else graph["reconstruction"].log()[-2000:],
         "last_segmented_frame_s_after_kill": round(segmented_at[-1] - killed_at, 1) if segmented_at else None,
-        "restart_s_after_kill": round(restarted_at - killed_at, 1),
         "fresh_reader": None if resumed else frames_to_a_fresh_reader(probe, 10.0),
         "alive_after": {k: p.alive() for k, p in graph.items()},
     }
