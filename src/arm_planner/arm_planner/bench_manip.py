@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from arm_planner.bench_stats import BINS, bin_label, summarise, write_plots, write_report
 from arm_planner.mppi import STATE_SPEC
-from arm_planner.planner import PlannerConfig
+from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.session import ManipulationSession
 from arm_planner.twin import TwinObject
@@ -234,8 +234,10 @@ def main(argv=None) -> int:
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
     parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
-    parser.add_argument("--rearrange-steps", type=int, default=300, help="rearrange step budget (0: --steps)")
-    parser.add_argument("--push-steps", type=int, default=300, help="push step budget (0: --steps)")
+    for task in ("rearrange", "push"):
+        parser.add_argument(
+            f"--{task}-steps", type=int, default=DEFAULT_TASK_STEPS[task], help=f"{task} step budget (0: --steps)"
+        )
     parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
     parser.add_argument(

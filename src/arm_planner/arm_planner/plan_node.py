@@ -27,7 +27,7 @@ from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
-from arm_planner.planner import PlannerConfig, resume_point
+from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
 from arm_planner.session import ManipulationSession, Outcome
 from arm_sim.conversions import ConversionError
 from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
@@ -50,7 +50,7 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
     task_steps = {
-        task: declare(node, f"{task}_steps", 300, f"Step budget of {task} (0: steps)", 0, 5000)
+        task: declare(node, f"{task}_steps", DEFAULT_TASK_STEPS[task], f"Step budget of {task} (0: steps)", 0, 5000)
         for task in ("push", "rearrange")
     }
     config.task_steps = {task: steps for task, steps in task_steps.items() if steps}
