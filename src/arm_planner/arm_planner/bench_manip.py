@@ -234,10 +234,8 @@ def main(argv=None) -> int:
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
     parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
-    for task in ("rearrange", "push"):
-        parser.add_argument(
-            f"--{task}-steps", type=int, default=DEFAULT_TASK_STEPS[task], help=f"{task} step budget (0: --steps)"
-        )
+    for task, steps in DEFAULT_TASK_STEPS.items():
+        parser.add_argument(f"--{task}-steps", type=int, default=steps, help=f"{task} step budget (0: --steps)")
     parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
     parser.add_argument(
@@ -278,7 +276,7 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.close_steps = args.close_steps
-    budgets = {"rearrange": args.rearrange_steps, "push": args.push_steps}
+    budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
     period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
     settings = {

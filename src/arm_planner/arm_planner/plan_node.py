@@ -50,8 +50,8 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
     task_steps = {
-        task: declare(node, f"{task}_steps", DEFAULT_TASK_STEPS[task], f"Step budget of {task} (0: steps)", 0, 5000)
-        for task in ("push", "rearrange")
+        task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
+        for task, steps in DEFAULT_TASK_STEPS.items()
     }
     config.task_steps = {task: steps for task, steps in task_steps.items() if steps}
     config.done_hold_steps = declare(node, "done_hold_steps", 10, "Stop once the goal held this many steps", 0, 1000)
