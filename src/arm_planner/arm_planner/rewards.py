@@ -142,7 +142,11 @@ class GraspReward(TaskReward):
     stall_window: int = 10
     stall_eps_m: float = 0.002
     max_close_distance_m: float = 0.015
-    grasp_depth_m: float = 0.03
+    # Grasp height: the centre of mass's, so gravity puts no torque about the closing axis, kept
+    # between these depths below the top (the palm meets the top ~4.5 cm above the TCP) and 1.5 cm
+    # above the table.
+    grasp_min_depth_m: float = 0.015
+    grasp_max_depth_m: float = 0.04
     # Rearrange: carry the object this high while it is far from the goal, set it down on arrival.
     carry_height_m: float = 0.0
     _history: list = field(default_factory=list)
@@ -153,7 +157,8 @@ class GraspReward(TaskReward):
         g = self.geometry
         self.start_com = g.com_world.copy()
         self.goal = g.com_world + self.goal_displacement
-        z = max(g.table_height_m + 0.015, g.top_z - self.grasp_depth_m)
+        z = np.clip(g.com_world[2], g.top_z - self.grasp_max_depth_m, g.top_z - self.grasp_min_depth_m)
+        z = max(g.table_height_m + 0.015, float(z))
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
         self.grasp_offset = self.grasp_point - g.com_world
         self.closing_axis = self.geometry.minor_axis_xy()

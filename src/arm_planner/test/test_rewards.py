@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from arm_planner.rewards import GraspReward, PushReward, RewardWeights, TargetGeometry
 
@@ -94,3 +95,20 @@ def test_the_hand_holds_still_while_the_fingers_close_on_a_nudged_object():
     assert reward.state == "grasped"
     scores = reward(np.stack([holding, chasing]), np.zeros((2, 0)))
     assert scores[1] > scores[0], "grasped, the hand goes with the object again"
+
+
+def _grasp_on(com_z: float, top_z: float) -> GraspReward:
+    box = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, top_z)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, com_z]), box, 0.0)
+    return GraspReward(hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0)
+
+
+def test_grasp_height_is_the_centre_of_mass_within_the_fingers_reach():
+    reward = _grasp_on(com_z=0.04, top_z=0.064)
+    assert reward.grasp_point[2] == pytest.approx(0.04), "at the centre of mass: no gravity torque in the grip"
+    tall = _grasp_on(com_z=0.10, top_z=0.20)
+    assert tall.grasp_point[2] == pytest.approx(0.20 - tall.grasp_max_depth_m), "the palm stops at the top"
+    top_heavy = _grasp_on(com_z=0.06, top_z=0.064)
+    assert top_heavy.grasp_point[2] == pytest.approx(0.064 - top_heavy.grasp_min_depth_m), "the fingers overlap the object"
+    flat = _grasp_on(com_z=0.01, top_z=0.02)
+    assert flat.grasp_point[2] == pytest.approx(0.015), "fingertips clear of the table"
