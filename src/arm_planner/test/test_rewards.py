@@ -109,6 +109,6 @@ def test_grasp_height_is_the_centre_of_mass_within_the_fingers_reach():
     tall = _grasp_on(com_z=0.10, top_z=0.20)
     assert tall.grasp_point[2] == pytest.approx(0.20 - tall.grasp_max_depth_m), "the palm stops at the top"
     top_heavy = _grasp_on(com_z=0.06, top_z=0.064)
-    assert top_heavy.grasp_point[2] == pytest.approx(0.064 - top_heavy.grasp_min_depth_m), "the fingers overlap the object"
+    assert top_heavy.grasp_point[2] == pytest.approx(0.064 - top_heavy.grasp_min_depth_m), "fingers overlap it"
     flat = _grasp_on(com_z=0.01, top_z=0.02)
     assert flat.grasp_point[2] == pytest.approx(0.015), "fingertips clear of the table"
