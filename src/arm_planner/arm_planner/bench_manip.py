@@ -52,9 +52,10 @@ class Episode:
     seed: int
 
 
-def plan_episodes(n: int, tasks, bins, seed: int) -> list[Episode]:
-    """n episodes cycling over tasks x bins (each combination before any repeats)."""
-    combos = [(t, b) for b in range(len(bins)) for t in tasks]
+def plan_episodes(n: int, tasks, bin_indices, seed: int) -> list[Episode]:
+    """n episodes cycling over tasks x visibility bins (indices into BINS; each combination before any
+    repeats)."""
+    combos = [(t, b) for b in bin_indices for t in tasks]
     return [Episode(i, *combos[i % len(combos)], seed * 100_003 + i) for i in range(n)]
 
 
@@ -232,6 +233,10 @@ def main(argv=None) -> int:
     parser.add_argument("--objects", default=None, help="folder of target meshes (.obj/.stl/.ply, metres)")
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    labels = [bin_label(b) for b in BINS]
+    parser.add_argument(
+        "--bins", nargs="+", default=labels, choices=labels, metavar="BIN", help="visible-fraction bins to run"
+    )
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
     parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
     for task, steps in DEFAULT_TASK_STEPS.items():
@@ -270,8 +275,9 @@ def main(argv=None) -> int:
     distractor_pool = object_pool(None, split="heldout", seed=args.seed + 1)
     n = args.episodes
     if args.full:
-        n = 3 * max(len(target_pool), 26 if args.objects is None else len(target_pool)) * len(args.tasks) * len(BINS)
-    episodes = plan_episodes(n, args.tasks, BINS, args.seed)
+        targets = max(len(target_pool), 26 if args.objects is None else len(target_pool))
+        n = 3 * targets * len(args.tasks) * len(args.bins)
+    episodes = plan_episodes(n, args.tasks, [labels.index(b) for b in args.bins], args.seed)
     config = PlannerConfig()
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
@@ -284,6 +290,7 @@ def main(argv=None) -> int:
         "seed": args.seed,
         "methods": args.methods,
         "tasks": args.tasks,
+        "bins": args.bins,
         "target_scale": args.target_scale,
         "steps": args.steps,
         "task_steps": config.task_steps,

@@ -19,7 +19,7 @@ def test_bins_match_the_paper():
 
 
 def test_episodes_cycle_tasks_and_bins():
-    episodes = plan_episodes(66, ["grasp", "push", "rearrange"], BINS, 0)
+    episodes = plan_episodes(66, ["grasp", "push", "rearrange"], range(len(BINS)), 0)
     combos = {(e.task, e.bin_index) for e in episodes[:33]}
     assert len(combos) == 33 and len({e.seed for e in episodes}) == 66
 
