@@ -22,6 +22,8 @@ def test_episodes_cycle_tasks_and_bins():
     episodes = plan_episodes(66, ["grasp", "push", "rearrange"], range(len(BINS)), 0)
     combos = {(e.task, e.bin_index) for e in episodes[:33]}
     assert len(combos) == 33 and len({e.seed for e in episodes}) == 66
+    two_bins = plan_episodes(12, ["grasp", "push", "rearrange"], [1, 10], 0)
+    assert {e.bin_index for e in two_bins} == {1, 10} and len({(e.task, e.bin_index) for e in two_bins[:6]}) == 6
 
 
 def test_summary_layout_and_excluded_rows():
