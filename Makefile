@@ -8,13 +8,13 @@ setup:
 	@scripts/bootstrap.sh
 
 demo: setup
-	@$(ENV) && python scripts/demo.py $(ARGS)
+	@$(ENV) && demo $(ARGS)
 
 test: setup
 	@$(ENV) && python -m pytest -q -p no:cacheprovider src tests $(ARGS)
 
 lint: setup
-	@$(ENV) && ruff check src tests scripts launch
+	@$(ENV) && ruff check src tests scripts
 
 bench-perf: setup
 	@$(ENV) && bench_perf $(ARGS)

@@ -1,7 +1,7 @@
 import pytest
 import rclpy
 
-from arm_sim.ros_common import use_private_domain
+from arm_ros.common import use_private_domain
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -7,18 +7,19 @@ import subprocess
 import time
 
 import rclpy
+from ament_index_python.packages import get_package_prefix
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+from arm_ros.processes import config_file
 
 
 def executable(package: str, name: str) -> str:
-    return str(ROOT / "install" / package / "lib" / package / name)
+    return str(pathlib.Path(get_package_prefix(package)) / "lib" / package / name)
 
 
 def start_node(package: str, name: str, *ros_args: str, params_file: str | None = None, log=None):
     cmd = [executable(package, name), "--ros-args"]
     if params_file:
-        cmd += ["--params-file", str(ROOT / "config" / params_file)]
+        cmd += ["--params-file", str(config_file(params_file))]
     cmd += list(ros_args)
     return subprocess.Popen(
         cmd, stdout=log or subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True

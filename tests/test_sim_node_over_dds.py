@@ -7,9 +7,9 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_interfaces.msg import ReconstructedObjectArray
+from arm_ros.common import latched_qos, sensor_qos
+from arm_ros.conversions import K_from_camera_info, depth_to_metres, image_to_numpy, pose_to_matrix
 from arm_sim import robot
-from arm_sim.conversions import K_from_camera_info, depth_to_metres, image_to_numpy, pose_to_matrix
-from arm_sim.ros_common import latched_qos, sensor_qos
 
 from ros_helpers import spin_until, start_node, stop_node
 

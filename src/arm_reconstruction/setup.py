@@ -22,7 +22,6 @@ setup(
             "reconstruction_node = arm_reconstruction.reconstruction_node:main",
             "datagen = arm_reconstruction.datagen:main",
             "train = arm_reconstruction.train:main",
-            "bench_recon = arm_reconstruction.bench_recon:main",
         ],
     },
 )

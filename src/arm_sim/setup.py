@@ -1,3 +1,4 @@
+
 from setuptools import find_packages, setup
 
 package_name = "arm_sim"
@@ -10,20 +11,13 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
     ],
-    package_data={package_name: ["data/*", "checkpoints/*"]},
     install_requires=["setuptools"],
     zip_safe=False,
     maintainer="ARM ROS maintainers",
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={
-        "console_scripts": [
+    entry_points={"console_scripts": [
             "sim_node = arm_sim.sim_node:main",
-            "bench_perf = arm_sim.bench_perf:main",
-            "record = arm_sim.bag_record:main",
-            "replay = arm_sim.bag_replay:main",
-            "bench_robustness = arm_sim.bench_robustness:main",
-        ],
-    },
+    ]},
 )

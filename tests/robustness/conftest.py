@@ -9,7 +9,7 @@ import tempfile
 
 import pytest
 
-from arm_sim.robustness import render_frames
+from arm_benchmarks.robustness import render_frames
 
 
 @pytest.fixture(scope="session")

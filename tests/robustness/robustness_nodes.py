@@ -6,8 +6,8 @@ ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..." adds parameters); tests that need 
 
 import pytest
 
-from arm_sim import robustness
-from arm_sim.robustness import NodeProcess, Probe, convention_report, node_built
+from arm_benchmarks import robustness
+from arm_benchmarks.robustness import NodeProcess, Probe, convention_report, node_built
 
 
 def reconstruction_params() -> dict:

@@ -9,7 +9,7 @@ from node_conventions import (  # noqa: F401  collected here
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from robustness_nodes import reconstruction_params, run_against
 
-from arm_sim.robustness_cases import run_reconstruction_bad_inputs
+from arm_benchmarks.robustness_cases import run_reconstruction_bad_inputs
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,7 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import Image
 
-from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
-from arm_sim import robustness
-from arm_sim.bags import (
+from arm_bags.bags import (
     BagError,
     BagReader,
     BagWriter,
@@ -22,8 +20,10 @@ from arm_sim.bags import (
     shift_stamps,
     write_bag,
 )
-from arm_sim.conversions import numpy_to_image, reconstructed_object_msg
-from arm_sim.robustness import NodeProcess, Probe, header_at, node_built, tracebacks
+from arm_benchmarks import robustness
+from arm_benchmarks.robustness import NodeProcess, Probe, header_at, node_built, tracebacks
+from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_ros.conversions import numpy_to_image, reconstructed_object_msg
 
 
 def image(stamp_s, value=7, shape=(48, 64, 3)):

@@ -6,8 +6,8 @@ import json
 import pytest
 from robustness_nodes import reconstruction_params
 
-from arm_sim.robustness import Probe, node_built, render_frames, write_camera_bag
-from arm_sim.robustness_load import run_fault, run_load, start_graph, stop_graph
+from arm_benchmarks.robustness import Probe, node_built, render_frames, write_camera_bag
+from arm_benchmarks.robustness_load import run_fault, run_load, start_graph, stop_graph
 
 LOAD_S = 20.0
 CAMERA_HZ = 30.0

@@ -2,7 +2,7 @@
 
 import pytest
 
-from arm_sim.robustness_cases import PARAMETER_CASES, run_parameter_validation
+from arm_benchmarks.robustness_cases import PARAMETER_CASES, run_parameter_validation
 
 
 @pytest.fixture(scope="module")

@@ -29,8 +29,8 @@ from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg,
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
 from arm_planner.session import ManipulationSession, Outcome
-from arm_sim.conversions import ConversionError
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
+from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
+from arm_ros.conversions import ConversionError
 
 
 def _planner_config(node: Node) -> tuple[PlannerConfig, float]:

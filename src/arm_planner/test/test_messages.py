@@ -5,7 +5,7 @@ from shape_msgs.msg import Mesh, MeshTriangle
 
 from arm_interfaces.msg import ReconstructedObject, ReconstructedObjectArray
 from arm_planner.messages import joint_state_arrays, trajectory_msg, twin_objects_from_msg
-from arm_sim.conversions import ConversionError, matrix_to_pose, mesh_to_msg
+from arm_ros.conversions import ConversionError, matrix_to_pose, mesh_to_msg
 
 
 def _box_msg():

@@ -17,9 +17,9 @@ from trajectory_msgs.msg import JointTrajectory
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObject, ReconstructedObjectArray
 from arm_planner.plan_node import PlanNode
+from arm_ros.common import latched_qos
+from arm_ros.conversions import matrix_to_pose, mesh_to_msg
 from arm_sim import robot
-from arm_sim.conversions import matrix_to_pose, mesh_to_msg
-from arm_sim.ros_common import latched_qos
 
 
 @pytest.fixture(scope="module")

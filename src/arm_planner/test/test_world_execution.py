@@ -4,7 +4,7 @@ import numpy as np
 import trimesh
 from test_planner import _setup
 
-from arm_planner.bench_manip import ground_truth_objects
+from arm_benchmarks.bench_manip import ground_truth_objects
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig, PlanRequest
 from arm_planner.session import ManipulationSession

@@ -11,7 +11,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from arm_interfaces.msg import GridMetadata, ReconstructedObjectArray, SegmentedFrame
 from arm_interfaces.msg import ReconstructedObject as ReconstructedObjectMsg
-from arm_sim.conversions import (
+from arm_ros.conversions import (
     ConversionError,
     K_from_camera_info,
     camera_info_from_K,

@@ -144,7 +144,7 @@ def _object_pose(mesh: trimesh.Trimesh) -> np.ndarray:
 def estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera) -> float:
     """Visible pixels of the object over the pixels its reconstruction (convex parts, (N, 3) world vertex
     arrays) covers alone (clipped to 1; -1 when it projects to no pixel)."""
-    from arm_sim.camera import silhouette
+    from arm_core.camera import silhouette
 
     height, width = labels.shape
     alone = silhouette(parts_world, K, T_world_camera, width, height).sum()

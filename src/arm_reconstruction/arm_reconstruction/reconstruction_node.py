@@ -17,8 +17,7 @@ from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
-from arm_sim.conversions import ConversionError
-from arm_sim.ros_common import (
+from arm_ros.common import (
     RateLimitedErrors,
     declare,
     diagnostics_msg,
@@ -26,6 +25,7 @@ from arm_sim.ros_common import (
     run_node,
     sensor_qos,
 )
+from arm_ros.conversions import ConversionError
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings

@@ -25,7 +25,7 @@ def sim_frame():
     rng = np.random.default_rng(3)
     scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=6)
     world = SimWorld(scene, robot_arm=False, width=320, height=240)
-    from arm_sim.camera import look_at
+    from arm_core.camera import look_at
 
     frame = world.render(look_at((0.7, 0.3, 0.5), scene.objects[0].T_world_object[:3, 3]), rng=rng)
     world.close()

@@ -2,13 +2,13 @@ import numpy as np
 import pytest
 import torch
 
+from arm_core.camera import look_at
 from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
 from arm_reconstruction.meshing import to_manifold
 from arm_reconstruction.network import build_model
 from arm_reconstruction.pipeline import STAGES, ReconstructionSettings, Reconstructor, reconstruct
-from arm_sim.camera import look_at
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld

@@ -11,6 +11,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from arm_core.camera import look_at
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_reconstruction.checkpoint import save_checkpoint
 from arm_reconstruction.grid import voxelize_mesh
@@ -25,10 +26,9 @@ from arm_reconstruction.messages import (
 from arm_reconstruction.network import build_model
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor
 from arm_reconstruction.reconstruction_node import ReconstructionNode
-from arm_sim.camera import look_at
-from arm_sim.conversions import ConversionError
+from arm_ros.common import latched_qos
+from arm_ros.conversions import ConversionError
 from arm_sim.objects import object_pool
-from arm_sim.ros_common import latched_qos
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld
 

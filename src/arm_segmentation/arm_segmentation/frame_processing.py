@@ -12,10 +12,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image
 
 from arm_interfaces.msg import SegmentedFrame
-from arm_segmentation.geometry import InputError
-from arm_segmentation.segmentation import SegmentationParams, segment
-from arm_segmentation.visualization import overlay
-from arm_sim.conversions import (
+from arm_ros.conversions import (
     ConversionError,
     K_from_camera_info,
     depth_to_metres,
@@ -23,6 +20,9 @@ from arm_sim.conversions import (
     numpy_to_image,
     pose_to_matrix,
 )
+from arm_segmentation.geometry import InputError
+from arm_segmentation.segmentation import SegmentationParams, segment
+from arm_segmentation.visualization import overlay
 
 RGB_ENCODINGS = ("rgb8", "bgr8")
 DEPTH_ENCODINGS = ("32FC1", "16UC1", "mono16")

@@ -10,12 +10,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from arm_interfaces.msg import SegmentedFrame
+from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
 from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, segment_messages
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
 from arm_segmentation.table_plane import TableParams
-from arm_sim.ros_common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
 
 INPUTS = ("rgb", "depth", "camera_info", "pose", "labels")
 

@@ -4,9 +4,9 @@ from geometry_msgs.msg import PoseStamped
 from seg_fixtures import Box, add_noise, look_at, render
 from std_msgs.msg import Header
 
+from arm_ros.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image
 from arm_segmentation.frame_processing import FrameError, segment_messages
 from arm_segmentation.metrics import segmentation_metrics
-from arm_sim.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image
 
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
 BOXES = [

@@ -1,7 +1,6 @@
 """segmentation_node in its own process, fed over real DDS by this test."""
 
 import os
-import pathlib
 import signal
 import subprocess
 import time
@@ -9,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from arm_sim.ros_common import use_private_domain
+from arm_ros.common import use_private_domain
 
 use_private_domain()
 
@@ -21,16 +20,16 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
+from arm_ros.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image  # noqa: E402
+from arm_ros.processes import config_file, executable  # noqa: E402
 from arm_segmentation.metrics import segmentation_metrics  # noqa: E402
-from arm_sim.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image  # noqa: E402
 
-ROOT = pathlib.Path(__file__).resolve().parents[3]
-EXECUTABLE = ROOT / "install" / "arm_segmentation" / "lib" / "arm_segmentation" / "segmentation_node"
+EXECUTABLE = executable("segmentation")
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
 
 
 def start(*params):
-    cmd = [str(EXECUTABLE), "--ros-args", "--params-file", str(ROOT / "config" / "segmentation_node.yaml")]
+    cmd = [str(EXECUTABLE), "--ros-args", "--params-file", str(config_file("segmentation_node.yaml"))]
     for p in params:
         cmd += ["-p", p]
     return subprocess.Popen(

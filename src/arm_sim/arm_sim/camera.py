@@ -1,13 +1,13 @@
-"""Pinhole camera model, camera pose sampling and silhouette rasterisation.
+"""Simulated camera: rendered frames and the benchmark's camera-pose sampling.
 
-T_world_camera is the pose of the optical frame (x right, y down, z forward) in the world frame.
 MuJoCo cameras look along their -z with +y up, i.e. R_world_mjcam = R_world_camera @ diag(1, -1, -1).
 """
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
+
+from arm_core.camera import look_at
 
 OPTICAL_TO_MUJOCO = np.diag([1.0, -1.0, -1.0])
 
@@ -23,28 +23,6 @@ class RgbdFrame:
     T_world_camera: np.ndarray
     visible_fraction: np.ndarray
     stamp_s: float = 0.0
-
-
-def intrinsics(width: int = 640, height: int = 480, fovy_deg: float = 45.0) -> np.ndarray:
-    """Pinhole K (pixels) for a vertical field of view, square pixels, centred principal point."""
-    fy = 0.5 * height / np.tan(np.deg2rad(fovy_deg) / 2)
-    return np.array([[fy, 0.0, width / 2.0], [0.0, fy, height / 2.0], [0.0, 0.0, 1.0]])
-
-
-def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """T_world_camera of an optical frame at eye looking at target (image 'up' towards up)."""
-    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    if np.linalg.norm(x) < 1e-6:
-        x = np.cross(z, np.array([1.0, 0.0, 0.0]))
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, y, z], axis=1)
-    T[:3, 3] = eye
-    return T
 
 
 def sample_camera_pose(
@@ -69,57 +47,3 @@ def sample_camera_pose(
     offset = rng.normal(size=3)
     offset *= min(radius / 2, 0.25) * rng.uniform() ** (1 / 3) / np.linalg.norm(offset)
     return look_at(eye, table_centre + offset)
-
-
-def project_points(points_world: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray):
-    """World points (N,3) -> pixel coordinates (N,2) and optical-frame depth (N,)."""
-    T_camera_world = np.linalg.inv(T_world_camera)
-    p = points_world @ T_camera_world[:3, :3].T + T_camera_world[:3, 3]
-    z = p[:, 2]
-    uv = (p[:, :2] / np.maximum(z[:, None], 1e-9)) * np.diag(K)[:2] + K[:2, 2]
-    return uv, z
-
-
-def fill_convex_hull(mask: np.ndarray, points_px: np.ndarray) -> None:
-    """Set the pixels of mask whose centres lie inside the 2D convex hull of points_px (N, 2) (image
-    coordinates of project_points: pixel (row v, column u) has its centre at (u + 0.5, v + 0.5)),
-    which reproduces MuJoCo's rendered silhouettes."""
-    if len(points_px) < 3:
-        return
-    hull = cv2.convexHull(np.asarray(points_px, np.float32)).reshape(-1, 2).astype(np.float64)
-    if len(hull) < 3:
-        return
-    height, width = mask.shape
-    lo = np.maximum(np.ceil(hull.min(0) - 0.5), 0).astype(np.int64)
-    hi = np.minimum(np.floor(hull.max(0) - 0.5), [width - 1, height - 1]).astype(np.int64)
-    if np.any(hi < lo):
-        return
-    u, v = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
-    edges = np.roll(hull, -1, axis=0) - hull
-    pu, pv = u.reshape(-1, 1) + 0.5, v.reshape(-1, 1) + 0.5
-    cross = edges[:, 0] * (pv - hull[:, 1]) - edges[:, 1] * (pu - hull[:, 0])
-    area = np.sum(hull[:, 0] * np.roll(hull[:, 1], -1) - np.roll(hull[:, 0], -1) * hull[:, 1])
-    inside = np.all(cross * np.sign(area) >= 0, axis=1)
-    mask[v.ravel()[inside], u.ravel()[inside]] = True
-
-
-def silhouette(convex_parts_world, K, T_world_camera, width: int, height: int, near_m: float = 0.01) -> np.ndarray:
-    """Boolean mask of the pixels an object covers when rendered alone: the union of the projections
-    of its convex parts (each projects to the convex hull of its projected vertices), given as a list
-    of (N, 3) world-frame vertex arrays."""
-    mask = np.zeros((height, width), bool)
-    for vertices in convex_parts_world:
-        uv, z = project_points(np.asarray(vertices, dtype=np.float64), K, T_world_camera)
-        fill_convex_hull(mask, np.clip(uv[z > near_m], -1e5, 1e5))
-    return mask
-
-
-def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
-    """Depth image -> (H,W,3) world points (NaN where depth is 0)."""
-    h, w = depth_m.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    z = np.where(depth_m > 0, depth_m, np.nan).astype(np.float32)
-    x = (u - K[0, 2]) / K[0, 0] * z
-    y = (v - K[1, 2]) / K[1, 1] * z
-    p = np.stack([x, y, z], -1)
-    return p @ T_world_camera[:3, :3].T.astype(np.float32) + T_world_camera[:3, 3].astype(np.float32)

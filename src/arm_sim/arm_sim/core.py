@@ -4,8 +4,8 @@ import time
 
 import numpy as np
 
+from arm_core.camera import look_at
 from arm_sim import robot
-from arm_sim.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene

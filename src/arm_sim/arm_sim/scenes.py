@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from arm_sim.camera import look_at
+from arm_core.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import ObjectModel, ObjectPool
 from arm_sim.world import OBJECT_DENSITY_KG_M3, SimWorld, object_body_name

@@ -12,10 +12,7 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from arm_interfaces.msg import ReconstructedObjectArray
-from arm_sim import robot
-from arm_sim.conversions import camera_info_from_K, matrix_to_pose, numpy_to_image, reconstructed_object_msg
-from arm_sim.core import SimSession, trajectory_targets
-from arm_sim.ros_common import (
+from arm_ros.common import (
     RateLimitedErrors,
     declare,
     diagnostics_msg,
@@ -23,6 +20,9 @@ from arm_sim.ros_common import (
     run_node,
     sensor_qos,
 )
+from arm_ros.conversions import camera_info_from_K, matrix_to_pose, numpy_to_image, reconstructed_object_msg
+from arm_sim import robot
+from arm_sim.core import SimSession, trajectory_targets
 
 
 class SimNode(Node):

@@ -3,8 +3,9 @@
 import mujoco
 import numpy as np
 
+from arm_core.camera import intrinsics, silhouette
 from arm_sim import robot
-from arm_sim.camera import OPTICAL_TO_MUJOCO, RgbdFrame, intrinsics, silhouette
+from arm_sim.camera import OPTICAL_TO_MUJOCO, RgbdFrame
 from arm_sim.depth_noise import DepthNoise, apply_depth_noise
 
 RENDER_CAMERA = "render_camera"

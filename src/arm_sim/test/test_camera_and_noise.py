@@ -1,6 +1,7 @@
 import numpy as np
 
-from arm_sim.camera import backproject, intrinsics, look_at, project_points, sample_camera_pose, silhouette
+from arm_core.camera import backproject, intrinsics, look_at, project_points, silhouette
+from arm_sim.camera import sample_camera_pose
 from arm_sim.depth_noise import DepthNoise, apply_depth_noise
 
 

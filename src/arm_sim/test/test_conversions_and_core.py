@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import CameraInfo, Image
 
-from arm_sim.conversions import (
+from arm_ros.conversions import (
     ConversionError,
     K_from_camera_info,
     camera_info_from_K,

@@ -1,8 +1,8 @@
 import mujoco
 import numpy as np
 
+from arm_core.camera import look_at
 from arm_sim import robot
-from arm_sim.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import make_object, object_pool
 from arm_sim.scenes import PlacedObject, Scene, cluttered_scene, task_scene

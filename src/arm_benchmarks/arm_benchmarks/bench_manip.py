@@ -1,0 +1,355 @@
+"""bench_manip: the paper's cluttered manipulation benchmark (appendix "Cluttered Manipulation Benchmark").
+
+Each episode is one task scene: a target object at a fixed spot, distractors in front of it until its
+visible fraction falls in the episode's bin, one RGB-D view from the robot side with ground-truth
+instance labels (as in the paper). Every method reconstructs the scene from that view (ground truth
+uses the true meshes), the planner plans the task in a twin of that reconstruction, and the plan is
+executed in the ground-truth world: closed loop by default (every --observe-period seconds the twin
+takes the world's joint states and tracked object poses; see arm_planner.world_execution), or open
+loop as in the paper with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
+30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
+
+Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
+carries the run key (a digest of the settings, the shipped checkpoints and the source of the packages
+that produce the result); rows with another key are moved to episodes.stale.jsonl, never reused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import pathlib
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, write_report
+from arm_planner.mppi import STATE_SPEC
+from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
+from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
+from arm_planner.session import ManipulationSession
+from arm_planner.twin import TwinObject
+from arm_planner.world_execution import run_in_world
+
+GOALS = {
+    TASK_GRASP: (0.0, 0.0, 0.0),
+    TASK_PUSH: (0.05, -0.30, 0.0),  # 30 cm right (-y), 5 cm forward (+x)
+    TASK_REARRANGE: (0.20, 0.20, 0.0),  # 20 cm forward, 20 cm left
+}
+TOLERANCE_M = 0.025
+GROUND_TRUTH = "ground_truth"
+DEFAULT_METHODS = (GROUND_TRUTH, "baseline", "baseline+E", "arm")
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    index: int
+    task: str
+    bin_index: int
+    seed: int
+
+
+def plan_episodes(n: int, tasks, bin_indices, seed: int) -> list[Episode]:
+    """n episodes cycling over tasks x visibility bins (indices into BINS; each combination before any
+    repeats)."""
+    combos = [(t, b) for b in bin_indices for t in tasks]
+    return [Episode(i, *combos[i % len(combos)], seed * 100_003 + i) for i in range(n)]
+
+
+def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 3):
+    """(scene, target index, frame) for the episode, or raises RuntimeError when the bin is unreachable."""
+    from arm_sim.depth_noise import DepthNoise
+    from arm_sim.scenes import task_scene
+    from arm_sim.world import SimWorld
+
+    lo, hi = bins[episode.bin_index]
+    last = None
+    for attempt in range(tries):
+        rng = np.random.default_rng([episode.seed, attempt])
+        target = target_pool.sample(rng)
+        try:
+            scene, target_index, camera = task_scene(
+                target, distractor_pool, rng, visible_range=(lo, hi), target_scale=target_scale
+            )
+        except RuntimeError as error:
+            last = error
+            continue
+        world = SimWorld(scene, robot_arm=True)
+        frame = world.render(camera, noise=DepthNoise(), rng=rng)
+        world.close()
+        visible = float(frame.visible_fraction[target_index])
+        if lo <= visible < hi:
+            return scene, target_index, frame, target.name
+        last = RuntimeError(f"visible fraction {visible:.2f} left [{lo}, {hi}) after settling")
+    raise RuntimeError(f"no scene for bin {bin_label(bins[episode.bin_index])}: {last}")
+
+
+def ground_truth_objects(scene) -> list[TwinObject]:
+    objects = []
+    for i, placed in enumerate(scene.objects):
+        model = placed.model.scaled(placed.scale)
+        objects.append(TwinObject(i + 1, placed.T_world_object, model.mesh, model.convex_parts, 1.0, GROUND_TRUTH))
+    return objects
+
+
+def reconstructed_objects(method: str, frame) -> list[TwinObject]:
+    from arm_reconstruction.pipeline import reconstruct
+
+    objects = reconstruct(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, method=method)
+    return [
+        TwinObject(o.id, o.T_world_object, o.mesh, o.convex_parts, o.visible_fraction, o.method)
+        for o in objects
+        if o.ok
+    ]
+
+
+def target_stability_m(session: ManipulationSession, target_id: int, objects, table_height_m: float) -> float:
+    """How far the target's centre moves in 1 s when its twin (objects as viewed, robot still at home)
+    settles: 0 = stable."""
+    import mujoco
+
+    from arm_sim import robot
+
+    session.set_objects(objects, table_height_m)
+    twin = session.twin
+    if twin is None or target_id not in twin:
+        return float("nan")
+    model = twin.model
+    flags = model.opt.enableflags
+    model.opt.enableflags = flags & ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    data = mujoco.MjData(model)
+    poses = {o.id: o.T_world_object for o in objects}
+    mujoco.mj_setState(model, data, twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M, poses), STATE_SPEC)
+    mujoco.mj_forward(model, data)
+    body = model.body(twin.body_name(target_id)).id
+    start = data.xipos[body].copy()
+    mujoco.mj_step(model, data, nstep=int(round(1.0 / model.opt.timestep)))
+    mujoco.mj_forward(model, data)
+    model.opt.enableflags = flags
+    return float(np.linalg.norm(data.xipos[body] - start))
+
+
+def run_method(method, scene, target_index, frame, task, config, twin_timestep_s, period_steps) -> dict:
+    from arm_sim.world import SimWorld
+
+    started = time.perf_counter()
+    row = {"method": method}
+    try:
+        objects = ground_truth_objects(scene) if method == GROUND_TRUTH else reconstructed_objects(method, frame)
+    except Exception as error:  # a missing checkpoint makes the method unavailable; other errors fail it
+        if type(error).__name__ in ("CheckpointError", "FileNotFoundError", "ImportError", "ModuleNotFoundError"):
+            return row | {"success": False, "unavailable": f"{type(error).__name__}: {error}"}
+        return row | {"success": False, "failure": f"reconstruction failed: {type(error).__name__}: {error}"}
+    row["reconstruct_s"] = time.perf_counter() - started
+    session = ManipulationSession(config, twin_timestep_s)
+    world = SimWorld(scene, robot_arm=True)
+    try:
+        run = run_in_world(
+            session, world, objects, scene.table_height_m, target_index, task, GOALS[task], TOLERANCE_M, period_steps
+        )
+        outcome = run.outcome
+        row.update(
+            predicted_success=bool(outcome.success),
+            predicted_error_m=outcome.final_error_m,
+            plan_message=outcome.message,
+            twin_objects=outcome.twin_objects,
+            observations=run.observations,
+        )
+        if outcome.result is not None and len(outcome.result.step_ms):
+            row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
+            row["plan_steps"] = len(outcome.result.times_s)
+        if session.twin is not None:
+            row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
+    finally:
+        session.close()
+        world.close()
+    if not run.outcome.planned:
+        return row | {"success": False, "failure": run.outcome.message, "seconds": time.perf_counter() - started}
+    return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
+
+
+def _json_safe(value):
+    """NaN (no data) -> null, so summary.json is strict JSON."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+RESULT_PACKAGES = ("arm_planner", "arm_sim", "arm_reconstruction")
+REPORTING_ONLY = ("bench_stats.py",)  # statistics and plots of the rows, not the rows
+
+
+def run_key(settings: dict) -> str:
+    """Digest of the settings, the checkpoints and the Python source of RESULT_PACKAGES."""
+    import importlib
+
+    digest = hashlib.sha1(json.dumps(settings, sort_keys=True).encode())
+    for name in RESULT_PACKAGES:
+        root = pathlib.Path(importlib.import_module(name).__file__).parent
+        for path in sorted(root.rglob("*")):
+            if path.suffix in (".py", ".pt") and path.is_file() and path.name not in REPORTING_ONLY:
+                digest.update(path.relative_to(root).as_posix().encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def load_done(path: pathlib.Path, key: str) -> dict:
+    """(episode, method) -> row for the rows of run `key`; rows of other runs go to episodes.stale.jsonl."""
+    done, stale = {}, []
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                if row.get("run_key") == key:
+                    done[(row["episode"], row["method"])] = row
+                else:
+                    stale.append(line)
+    if stale:
+        stale_path = path.with_name("episodes.stale.jsonl")
+        with stale_path.open("a") as sink:
+            sink.write("\n".join(stale) + "\n")
+        path.write_text("".join(json.dumps(row) + "\n" for row in done.values()))
+        print(f"[bench_manip] {len(stale)} rows from another run (code or settings changed) moved to {stale_path}")
+    return done
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, default=33, help="scenes (each planned by every method)")
+    parser.add_argument(
+        "--full",
+        action="store_true",
+        help="paper size: 3 scenes per target x task x visibility bin (2574 with 26 targets)",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="results/manip")
+    parser.add_argument("--objects", default=None, help="folder of target meshes (.obj/.stl/.ply, metres)")
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    labels = [bin_label(b) for b in BINS]
+    parser.add_argument(
+        "--bins", nargs="+", default=labels, choices=labels, metavar="BIN", help="visible-fraction bins to run"
+    )
+    parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
+    parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
+    for task, steps in DEFAULT_TASK_STEPS.items():
+        parser.add_argument(f"--{task}-steps", type=int, default=steps, help=f"{task} step budget (0: --steps)")
+    parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
+    parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
+    parser.add_argument(
+        "--observe-period",
+        type=float,
+        default=0.1,
+        help="closed loop: the twin observes the world's state every this many seconds (0: open loop, the paper's)",
+    )
+    parser.add_argument("--nthread", type=int, default=2)
+    parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
+    args = parser.parse_args(argv)
+    from arm_reconstruction.network import canonical_method
+
+    try:
+        args.methods = [
+            GROUND_TRUTH if m.replace("-", "_") == GROUND_TRUTH else canonical_method(m) for m in args.methods
+        ]
+    except ValueError as error:
+        parser.error(f"{error}, or {GROUND_TRUTH}")
+
+    import torch
+
+    torch.set_num_threads(2)
+    from arm_sim.objects import object_pool
+
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "episodes.jsonl"
+    if args.fresh and log.exists():
+        log.unlink()
+    target_pool = object_pool(args.objects, split="heldout", seed=args.seed)
+    distractor_pool = object_pool(None, split="heldout", seed=args.seed + 1)
+    n = args.episodes
+    if args.full:
+        targets = max(len(target_pool), 26 if args.objects is None else len(target_pool))
+        n = 3 * targets * len(args.tasks) * len(args.bins)
+    episodes = plan_episodes(n, args.tasks, [labels.index(b) for b in args.bins], args.seed)
+    config = PlannerConfig()
+    config.mppi.steps = args.steps
+    config.mppi.nthread = args.nthread
+    config.close_steps = args.close_steps
+    budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
+    config.task_steps = {task: steps for task, steps in budgets.items() if steps}
+    period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
+    settings = {
+        "episodes": n,
+        "seed": args.seed,
+        "methods": args.methods,
+        "tasks": args.tasks,
+        "bins": args.bins,
+        "target_scale": args.target_scale,
+        "steps": args.steps,
+        "task_steps": config.task_steps,
+        "close_steps": args.close_steps,
+        "twin_timestep_s": args.twin_timestep,
+        "observe_period_s": args.observe_period,
+        "objects": args.objects or "procedural heldout categories",
+        "nthread": args.nthread,
+    }
+    key = run_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
+    done = load_done(log, key)
+    progress = tqdm(
+        total=n * len(args.methods),
+        desc="bench_manip",
+        initial=sum(1 for e in episodes for m in args.methods if (e.index, m) in done),
+    )
+    with log.open("a") as sink:
+        for episode in episodes:
+            todo = [m for m in args.methods if (episode.index, m) not in done]
+            if not todo:
+                continue
+            base = {"episode": episode.index, "task": episode.task, "bin": bin_label(BINS[episode.bin_index])}
+            try:
+                scene, target_index, frame, target_name = build_scene(
+                    episode, BINS, target_pool, distractor_pool, args.target_scale
+                )
+                base |= {
+                    "target": target_name,
+                    "visible_fraction": float(frame.visible_fraction[target_index]),
+                    "objects": len(scene.objects),
+                }
+            except RuntimeError as error:
+                for method in todo:
+                    row = base | {"method": method, "skipped": str(error), "success": False, "run_key": key}
+                    sink.write(json.dumps(row) + "\n")
+                    done[(episode.index, method)] = row
+                    progress.update(1)
+                continue
+            for method in todo:
+                row = base | run_method(
+                    method, scene, target_index, frame, episode.task, config, args.twin_timestep, period_steps
+                )
+                row["run_key"] = key
+                sink.write(json.dumps(row) + "\n")
+                sink.flush()
+                done[(episode.index, method)] = row
+                progress.update(1)
+                progress.set_postfix(method=method, task=episode.task, ok=row["success"])
+    progress.close()
+    rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
+    summary = summarise(rows, args.methods, args.tasks, BINS, n)
+    summary["settings"] = settings | {"run_key": key}
+    (out / "summary.json").write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
+    write_plots(rows, summary, args.methods, BINS, out)
+    write_report(summary, out)
+    print(json.dumps(_json_safe({m: round(v["success"], 3) for m, v in summary["methods"].items()})))
+    print(f"[bench_manip] wrote {out / 'summary.json'}, {out / 'report.md'} and plots")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
