@@ -73,12 +73,53 @@ def silhouette(convex_parts_world, K, T_world_camera, width: int, height: int, n
     return mask
 
 
-def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
-    """Depth image -> (H,W,3) world points (NaN where depth is 0)."""
+def normalized_coordinates(v, u, K: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel rows v and columns u -> (x / z, y / z): where their rays cross the optical frame's
+    z = 1 plane, computed in dtype."""
+    x = (np.asarray(u).astype(dtype) - dtype(K[0, 2])) / dtype(K[0, 0])
+    y = (np.asarray(v).astype(dtype) - dtype(K[1, 2])) / dtype(K[1, 1])
+    return x, y
+
+
+def transform_points(points: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to (..., 3) points, in the points' dtype."""
+    R = T[:3, :3].astype(points.dtype)
+    t = T[:3, 3].astype(points.dtype)
+    return points @ R.T + t
+
+
+def backproject_image(depth_m: np.ndarray, K: np.ndarray, dtype=np.float32) -> np.ndarray:
+    """Organized depth image (HxW, metres) -> HxWx3 optical-frame points in dtype; pixels without a
+    return (depth 0) give (0, 0, 0)."""
     h, w = depth_m.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    z = np.where(depth_m > 0, depth_m, np.nan).astype(np.float32)
-    x = (u - K[0, 2]) / K[0, 0] * z
-    y = (v - K[1, 2]) / K[1, 1] * z
-    p = np.stack([x, y, z], -1)
-    return p @ T_world_camera[:3, :3].T.astype(np.float32) + T_world_camera[:3, 3].astype(np.float32)
+    x, _ = normalized_coordinates(0, np.arange(w), K, dtype)
+    _, y = normalized_coordinates(np.arange(h), 0, K, dtype)
+    points = np.empty((h, w, 3), dtype=dtype)
+    points[..., 0] = depth_m * x[None, :]
+    points[..., 1] = depth_m * y[:, None]
+    points[..., 2] = depth_m
+    return points
+
+
+def backproject_pixels(depth_m: np.ndarray, v: np.ndarray, u: np.ndarray, K, T_world_camera, dtype=np.float64):
+    """Pixels (rows v, columns u) of a depth image (metres) -> (N, 3) world points in dtype."""
+    z = depth_m[v, u].astype(dtype)
+    x, y = normalized_coordinates(v, u, K, dtype)
+    return transform_points(np.stack([x * z, y * z, z], 1), T_world_camera)
+
+
+def world_height(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
+    """HxW float32 world z of every pixel of a depth image (meaningless where depth is 0)."""
+    h, w = depth_m.shape
+    r = T_world_camera[2, :3]
+    x, _ = normalized_coordinates(0, np.arange(w), K, np.float32)
+    _, y = normalized_coordinates(np.arange(h), 0, K, np.float32)
+    u, v = x * np.float32(r[0]), y * np.float32(r[1])
+    return depth_m * (u[None, :] + v[:, None] + np.float32(r[2])) + np.float32(T_world_camera[2, 3])
+
+
+def ray_directions_world(v, u, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 world-frame direction of the rays of pixels (v, u), scaled to unit optical depth."""
+    x, y = normalized_coordinates(v, u, K, np.float32)
+    R = T_world_camera[:3, :3].astype(np.float32)
+    return x[:, None] * R[:, 0] + y[:, None] * R[:, 1] + R[:, 2]

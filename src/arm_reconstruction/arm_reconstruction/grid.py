@@ -16,6 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from arm_core.camera import backproject_pixels
+from arm_core.frames import FrameInputError, validate_frame
+
 CHANNELS = ("own", "others", "observed_empty", "unobserved")
 DEFAULT_RESOLUTION = 32
 DEFAULT_K = 4.0
@@ -26,8 +29,8 @@ SUPPORT_TOLERANCE_M = 0.01
 MAX_HULL_POINTS = 8192
 
 
-class GridInputError(ValueError):
-    """The frame cannot be turned into grids: bad shapes, non-finite pose or intrinsics."""
+class GridInputError(FrameInputError):
+    """The frame cannot be turned into grids: a bad frame (see validate_frame) or bad grid settings."""
 
 
 class EmptyObjectError(GridInputError):
@@ -97,27 +100,6 @@ class FrameGrids:
     errors: dict[int, str]
 
 
-def _validate_frame(depth_m, K, T_world_camera, labels):
-    depth_m = np.asarray(depth_m, dtype=np.float32)
-    labels = np.asarray(labels)
-    if depth_m.ndim != 2 or depth_m.size == 0:
-        raise GridInputError(f"depth must be a non-empty HxW image, got shape {depth_m.shape}")
-    if labels.shape != depth_m.shape:
-        raise GridInputError(f"labels shape {labels.shape} differs from depth shape {depth_m.shape}")
-    if not np.issubdtype(labels.dtype, np.integer):
-        raise GridInputError(f"labels must be an integer image, got {labels.dtype}")
-    K = np.asarray(K, dtype=np.float64)
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise GridInputError(f"K must be a finite 3x3 pinhole matrix with fx, fy > 0, got {K.tolist()}")
-    T = np.asarray(T_world_camera, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise GridInputError("T_world_camera must be a finite 4x4 transform")
-    if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-4) or np.linalg.det(T[:3, :3]) < 0:
-        raise GridInputError("T_world_camera rotation is not orthonormal")
-    depth_m = np.where(np.isfinite(depth_m) & (depth_m > 0), depth_m, np.float32(0.0))
-    return depth_m, K, T, labels
-
-
 def point_set_diameter(points: np.ndarray) -> float:
     """Largest distance between two points (exact for <= MAX_HULL_POINTS points: pairwise distances
     of the convex hull's vertices; larger sets are subsampled with a fixed stride)."""
@@ -165,7 +147,8 @@ class FrameObservation:
     """One RGB-D frame back-projected once and shared by the grids of all its objects."""
 
     def __init__(self, depth_m, K, T_world_camera, labels, background_stride: int = 2):
-        self.depth_m, self.K, self.T_world_camera, labels = _validate_frame(depth_m, K, T_world_camera, labels)
+        frame = validate_frame(depth_m, K, T_world_camera, labels=labels)
+        self.depth_m, self.K, self.T_world_camera, labels = frame.depth_m, frame.K, frame.T_world_camera, frame.labels
         self.height, self.width = self.depth_m.shape
         self.T_camera_world = np.linalg.inv(self.T_world_camera)
         valid = self.depth_m > 0
@@ -185,12 +168,8 @@ class FrameObservation:
         self.object_ids = [int(i) for i in ids]
 
     def _backproject(self, v: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Pixels (rows v, columns u) with valid depth -> (N, 3) world points, metres."""
-        z = self.depth_m[v, u].astype(np.float64)
-        x = (u - self.K[0, 2]) / self.K[0, 0] * z
-        y = (v - self.K[1, 2]) / self.K[1, 1] * z
-        R, t = self.T_world_camera[:3, :3], self.T_world_camera[:3, 3]
-        return np.stack([x, y, z], 1) @ R.T + t
+        """Pixels (rows v, columns u) with valid depth -> (N, 3) float64 world points, metres."""
+        return backproject_pixels(self.depth_m, v, u, self.K, self.T_world_camera)
 
     def points_of(self, object_id: int) -> np.ndarray:
         sl = self._slices.get(int(object_id))

@@ -195,9 +195,9 @@ class Reconstructor:
         return self.timer.cpu_s
 
     def __call__(self, rgb, depth_m, K, T_world_camera, labels, object_ids=None) -> list[ReconstructedObject]:
-        """Objects of one frame, ascending id. Raises GridInputError for a malformed frame (shapes,
-        non-finite pose or intrinsics); objects that cannot be reconstructed come back empty with
-        their error set."""
+        """Objects of one frame, ascending id. Raises FrameInputError for a malformed frame (shapes,
+        non-finite pose or intrinsics; GridInputError, a subclass, for the rgb or grid settings);
+        objects that cannot be reconstructed come back empty with their error set."""
         if rgb is not None and np.asarray(rgb).shape[:2] != np.asarray(depth_m).shape[:2]:
             raise GridInputError(f"rgb shape {np.asarray(rgb).shape} does not match depth {np.asarray(depth_m).shape}")
         self.timer.reset()

@@ -16,6 +16,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
+from arm_core.frames import FrameInputError
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_ros.common import (
     RateLimitedErrors,
@@ -29,7 +30,6 @@ from arm_ros.conversions import ConversionError
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
-from .grid import GridInputError
 from .messages import frame_from_msg, main_table_height, markers_msg, objects_to_msg
 from .network import METHODS
 from .pipeline import STAGES, ReconstructionSettings, Reconstructor
@@ -141,7 +141,7 @@ class ReconstructionNode(Node):
         try:
             frame = frame_from_msg(msg)
             objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
-        except (ConversionError, GridInputError) as error:
+        except (ConversionError, FrameInputError) as error:
             self._reject(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
             return
         except Exception as error:  # a failure inside one frame must not kill the node

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from arm_core.frames import FrameInputError
 from arm_reconstruction.grid import (
     EmptyObjectError,
     FrameObservation,
@@ -187,11 +188,11 @@ def test_bad_inputs_give_clear_errors(scene):
     assert result.object_ids == [] and 5 in result.errors and result.grids.shape[0] == 0
     bad_pose = T.copy()
     bad_pose[0, 3] = np.nan
-    with pytest.raises(GridInputError, match="finite"):
+    with pytest.raises(FrameInputError, match="finite"):
         four_channel_grid(depth, K, bad_pose, labels, 1)
-    with pytest.raises(GridInputError):
+    with pytest.raises(FrameInputError):
         four_channel_grid(depth, np.full((3, 3), np.nan), T, labels, 1)
-    with pytest.raises(GridInputError, match="shape"):
+    with pytest.raises(FrameInputError, match="shape"):
         four_channel_grid(depth, K, T, labels[:-1], 1)
     with pytest.raises(GridInputError, match="multiple of 8"):
         four_channel_grid(depth, K, T, labels, 1, resolution=30)

@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from arm_core.camera import look_at
+from arm_core.frames import FrameInputError
 from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
@@ -107,7 +108,7 @@ def test_bad_frames_and_objects(sim, checkpoints):
     rgb, depth, K, T, labels = args(frame)
     bad_pose = T.copy()
     bad_pose[2, 3] = np.nan
-    with pytest.raises(GridInputError):
+    with pytest.raises(FrameInputError):
         reconstructor(rgb, depth, K, bad_pose, labels)
     with pytest.raises(GridInputError, match="rgb"):
         reconstructor(rgb[:10], depth, K, T, labels)

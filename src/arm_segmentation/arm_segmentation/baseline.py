@@ -11,7 +11,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from arm_segmentation.geometry import backproject, validate_frame
+from arm_core.camera import backproject_image
+from arm_core.frames import validate_frame
 
 
 @dataclass(frozen=True)
@@ -81,10 +82,11 @@ def dbscan(points: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
 def segment_baseline(rgb, depth_m, K, T_world_camera, params: BaselineParams | None = None, seed: int = 0):
     """RANSAC plane + DBSCAN instance labels (uint16 HxW, 0 = table / background)."""
     params = params or BaselineParams()
-    _, depth, K, _ = validate_frame(rgb, depth_m, K, T_world_camera)
+    frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb)
+    depth, K = frame.depth_m, frame.K
     labels = np.zeros(depth.shape, dtype=np.uint16)
     valid = depth > 0
-    points = backproject(depth, K)[valid].astype(np.float64)
+    points = backproject_image(depth, K)[valid].astype(np.float64)
     plane = ransac_plane(points, np.random.default_rng(seed), params)
     if plane is None:
         return labels

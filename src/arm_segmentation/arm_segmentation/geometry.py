@@ -1,58 +1,7 @@
-"""Organized point clouds: validation, back-projection and surface normals (all vectorized)."""
+"""Organized depth images: hole filling, smoothing and surface normals (all vectorized)."""
 
 import cv2
 import numpy as np
-
-
-class InputError(ValueError):
-    """The RGB-D frame cannot be segmented: wrong shapes, bad intrinsics or a bad camera pose."""
-
-
-def validate_frame(rgb, depth_m, K, T_world_camera):
-    """Check and normalise one RGB-D frame.
-
-    Returns (rgb uint8 HxWx3, depth_m float32 HxW with 0 where invalid, K float64 3x3,
-    T_world_camera float64 4x4). Raises InputError on anything that cannot be repaired.
-    """
-    depth = np.asarray(depth_m)
-    if depth.ndim != 2 or depth.shape[0] < 4 or depth.shape[1] < 4:
-        raise InputError(f"depth must be an HxW image, got shape {depth.shape}")
-    rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[:2] != depth.shape:
-        raise InputError(f"rgb shape {rgb.shape} does not match depth shape {depth.shape} (HxWx3 expected)")
-    if rgb.dtype != np.uint8:
-        raise InputError(f"rgb must be uint8, got {rgb.dtype}")
-    K = np.asarray(K, dtype=np.float64)
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise InputError("K must be a finite 3x3 pinhole matrix with fx, fy > 0")
-    T = np.asarray(T_world_camera, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise InputError("T_world_camera must be a finite 4x4 matrix")
-    R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-3) or np.linalg.det(R) < 0.5:
-        raise InputError("T_world_camera rotation is not orthonormal")
-    depth = depth.astype(np.float32, copy=True)
-    depth[~np.isfinite(depth) | (depth < 0)] = 0.0
-    return rgb, depth, K, T
-
-
-def backproject(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Depth (HxW, metres) -> camera-frame points HxWx3 (float32); invalid pixels give (0, 0, 0)."""
-    h, w = depth_m.shape
-    u = (np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])
-    v = (np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1])
-    points = np.empty((h, w, 3), dtype=np.float32)
-    points[..., 0] = depth_m * u[None, :]
-    points[..., 1] = depth_m * v[:, None]
-    points[..., 2] = depth_m
-    return points
-
-
-def transform_points(points: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """Apply a 4x4 transform to (..., 3) points."""
-    R = T[:3, :3].astype(np.float32)
-    t = T[:3, 3].astype(np.float32)
-    return points @ R.T + t
 
 
 def preprocess_depth(depth_m: np.ndarray, fill_radius_px: int = 1, smooth_sigma_m: float = 0.01) -> np.ndarray:

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from arm_core.camera import ray_directions_world
 from arm_segmentation.clustering import chromaticity, hue_distance
 from arm_segmentation.table_plane import SupportLevel, extend_towards
 
@@ -36,10 +37,7 @@ def expected_table(ys, xs, K: np.ndarray, T: np.ndarray, level: SupportLevel, pa
     """(N,) bool for pixels (ys, xs): their ray meets the level's plane within range, inside the
     convex hull of its visible footprint and the camera's position (the occluder hides the table
     nearest to it)."""
-    u = (xs.astype(np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])
-    v = (ys.astype(np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1])
-    R = T[:3, :3].astype(np.float32)
-    direction = u[:, None] * R[:, 0] + v[:, None] * R[:, 1] + R[:, 2]  # world, per unit depth
+    direction = ray_directions_world(ys, xs, K, T)
     dz = direction[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         depth = np.float32(level.height_m - T[2, 3]) / dz

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from arm_core.camera import world_height
 from arm_segmentation.clustering import chromaticity, hue_distance
 from arm_segmentation.table_plane import TableParams, band_for_depth
 
@@ -30,15 +31,6 @@ class RefineParams:
 def upsample(image: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
     """Nearest-neighbour upsampling of an image subsampled with [::stride, ::stride]."""
     return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)[: shape[0], : shape[1]]
-
-
-def world_height(depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
-    """HxW float32 world z of every pixel (meaningless where depth is 0)."""
-    h, w = depth_m.shape
-    r = T_world_camera[2, :3]
-    u = ((np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])) * np.float32(r[0])
-    v = ((np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1])) * np.float32(r[1])
-    return depth_m * (u[None, :] + v[:, None] + np.float32(r[2])) + np.float32(T_world_camera[2, 3])
 
 
 def instance_colours(labels: np.ndarray, chroma: np.ndarray) -> np.ndarray:

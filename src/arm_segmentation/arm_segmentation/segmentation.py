@@ -9,14 +9,10 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from arm_core.camera import backproject_image, transform_points
+from arm_core.frames import validate_frame
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
-from arm_segmentation.geometry import (
-    backproject,
-    organized_normals,
-    preprocess_depth,
-    transform_points,
-    validate_frame,
-)
+from arm_segmentation.geometry import organized_normals, preprocess_depth
 from arm_segmentation.occluders import OccluderParams, near_occluders
 from arm_segmentation.refine import RefineParams, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
@@ -121,7 +117,7 @@ def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, sup
     """Points, normals, support levels (estimated unless given), support heights (computed unless
     given), table and object masks."""
     smoothed = preprocess_depth(depth, params.fill_radius_px, params.smooth_sigma_m)
-    points_camera = backproject(smoothed, K)
+    points_camera = backproject_image(smoothed, K)
     normals_camera = organized_normals(points_camera, step_px)
     valid = normals_camera[..., 2] != 0
     points_world = transform_points(points_camera, T)
@@ -186,11 +182,12 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     resolution (small, distant objects keep their depth edges); otherwise on the working grid,
     refined to full resolution afterwards.
 
-    Raises geometry.InputError for frames that cannot be interpreted (shapes, intrinsics, pose).
+    Raises arm_core.frames.FrameInputError for frames that cannot be interpreted (shapes, intrinsics, pose).
     A frame without a visible table gives an all-zero label image.
     """
     params = params or SegmentationParams()
-    rgb_full, depth_full, K_full, T = validate_frame(rgb, depth_m, K, T_world_camera)
+    frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb)
+    rgb_full, depth_full, K_full, T = frame.rgb, frame.depth_m, frame.K, frame.T_world_camera
     stride = params.working_stride
     rgb, depth, K = rgb_full, depth_full, K_full
     if stride > 1:

@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 from seg_fixtures import Box, add_noise, look_at, render
 
+from arm_core.frames import FrameInputError
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.clustering import ClusterParams
-from arm_segmentation.geometry import InputError
 from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import SegmentationParams, segment, segment_detailed
 
@@ -109,7 +109,7 @@ def test_invalid_frames_raise_input_error(change):
         T[:3, :3] *= 2.0
     elif change == "tiny":
         depth = depth[:2, :2]
-    with pytest.raises(InputError):
+    with pytest.raises(FrameInputError):
         segment(rgb, depth, K, T)
 
 
