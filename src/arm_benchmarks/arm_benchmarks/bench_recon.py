@@ -33,7 +33,6 @@ import os
 import pathlib
 import platform
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -41,6 +40,7 @@ import torch
 import trimesh
 from tqdm import tqdm
 
+from arm_core.atomic_io import atomic_write, atomic_write_json
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_reconstruction.grid import DEFAULT_RESOLUTION
@@ -448,18 +448,6 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
     return result, qualitative
 
 
-def _atomic_write(path: pathlib.Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def cached_scene(index: int, cache_dir: pathlib.Path, config, pool_factory, reconstructors) -> dict:
     """Scene result from the cache, or evaluated now and cached (JSON + qualitative .npz)."""
     path = cache_dir / f"scene_{index:05d}.json"
@@ -467,8 +455,8 @@ def cached_scene(index: int, cache_dir: pathlib.Path, config, pool_factory, reco
         return json.loads(path.read_text())
     result, qualitative = evaluate_scene(index, config, pool_factory(), reconstructors)
     if qualitative:
-        _atomic_write(cache_dir / f"scene_{index:05d}.npz", lambda tmp: _savez(tmp, qualitative))
-    _atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(json.dumps(result)))
+        atomic_write(cache_dir / f"scene_{index:05d}.npz", lambda tmp: _savez(tmp, qualitative))
+    atomic_write_json(path, result)
     return result
 
 

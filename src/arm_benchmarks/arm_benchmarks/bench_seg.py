@@ -21,6 +21,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from arm_core.atomic_io import atomic_write
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import segment
@@ -106,9 +107,7 @@ def load_or_render(index: int, args, pool_factory, frames_dir: pathlib.Path):
         with np.load(path) as data:
             return {k: data[k] for k in data.files}
     frame = render_scene(index, args, pool_factory())
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **frame)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: np.savez_compressed(tmp, **frame))
     return frame
 
 

@@ -7,12 +7,12 @@ File layout (torch.save of a dict, loaded with weights_only=True):
 
 import hashlib
 import json
-import os
 import pathlib
-import tempfile
 
 import numpy as np
 import torch
+
+from arm_core.atomic_io import atomic_write
 
 from .network import ARCHITECTURE, VARIANTS, build_model, model_config, resolve_device
 
@@ -70,16 +70,7 @@ def save_checkpoint(path, model: torch.nn.Module, config: dict | None = None, ex
         "extra": _plain(extra or {}),
         "sha256": _digest(full_config, state_dict),
     }
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            torch.save(payload, handle)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, lambda tmp: torch.save(payload, tmp))
 
 
 def read_checkpoint(path) -> dict:

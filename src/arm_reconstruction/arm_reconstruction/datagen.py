@@ -18,15 +18,14 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import pathlib
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 from tqdm import tqdm
 
+from arm_core.atomic_io import atomic_write, atomic_write_json
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
 
 FORMAT = "arm-voxel-shard-v1"
@@ -166,17 +165,7 @@ def _to_arrays(columns, seed, split, resolution, k) -> dict[str, np.ndarray]:
 
 def write_shard(path, arrays: dict[str, np.ndarray]) -> str:
     """Atomic compressed write; returns the file's sha256."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez_compressed(handle, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
-    return file_sha256(path)
+    return file_sha256(atomic_write(path, lambda tmp: np.savez_compressed(tmp, **arrays)))
 
 
 def file_sha256(path) -> str:
@@ -222,9 +211,7 @@ def write_manifest(out_dir, split: str, settings: dict) -> dict:
         "n_samples": int(sum(s["samples"] for s in shards)),
         "shards": shards,
     }
-    tmp = folder / ".manifest.json.tmp"
-    tmp.write_text(json.dumps(manifest, indent=1))
-    os.replace(tmp, folder / "manifest.json")
+    atomic_write_json(folder / "manifest.json", manifest, indent=1)
     return manifest
 
 

@@ -29,6 +29,7 @@ import torch
 from scipy import ndimage
 from tqdm import tqdm
 
+from arm_core.atomic_io import atomic_write
 from arm_reconstruction.checkpoint import save_checkpoint
 from arm_reconstruction.dataset import VoxelDataset, random_symmetry
 from arm_reconstruction.losses import (
@@ -218,11 +219,7 @@ def plot_curves(history: list[dict], evaluations: list[dict], path) -> None:
 
 
 def _save_state(path: pathlib.Path, state: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".state.", suffix=".tmp")
-    with os.fdopen(fd, "wb") as handle:
-        torch.save(state, handle)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
 
 
 class _StopFlag:

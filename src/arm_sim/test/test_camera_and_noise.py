@@ -1,27 +1,8 @@
 import numpy as np
 
-from arm_core.camera import backproject, intrinsics, look_at, project_points, silhouette
+from arm_core.camera import intrinsics, look_at, silhouette
 from arm_sim.camera import sample_camera_pose
 from arm_sim.depth_noise import DepthNoise, apply_depth_noise
-
-
-def test_look_at_builds_an_optical_frame():
-    T = look_at((1.0, 0.0, 1.0), (0.0, 0.0, 0.0))
-    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3))
-    assert np.allclose(T[:3, 2], np.array([-1, 0, -1]) / np.sqrt(2))  # z forward
-    assert T[2, 1] < 0  # image y (down) points down in the world
-
-
-def test_projection_and_backprojection_agree():
-    K = intrinsics(640, 480, 45.0)
-    T = look_at((0.8, 0.2, 0.6), (0.0, 0.0, 0.0))
-    points = np.random.default_rng(0).uniform(-0.2, 0.2, (10, 3))
-    uv, z = project_points(points, K, T)
-    depth = np.zeros((480, 640), np.float32)
-    px = np.round(uv).astype(int)
-    depth[px[:, 1], px[:, 0]] = z
-    back = backproject(depth, K, T)[px[:, 1], px[:, 0]]
-    assert np.allclose(back, points, atol=0.004)
 
 
 def test_sampled_camera_poses_follow_the_benchmark_shell():
