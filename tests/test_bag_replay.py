@@ -13,7 +13,7 @@ from arm_bags.bags import BagReader, header_stamp_ns
 from arm_benchmarks.robustness import NodeProcess, Probe, node_built, reconstruction_params, stamp_of, tracebacks
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_ros.common import latched_qos
-from arm_ros.conversions import reconstructed_object_from_msg
+from arm_ros.conversions.meshes import reconstructed_object_from_msg
 
 CAMERA = ["camera/color/image_raw", "camera/depth/image_raw", "camera/camera_info", "camera/pose"]
 SIM = {"n_objects": 4, "camera_rate_hz": 0.25, "width": 320, "height": 240}  # live reconstruction keeps up

@@ -8,7 +8,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_ros.common import latched_qos, sensor_qos
-from arm_ros.conversions import K_from_camera_info, depth_to_metres, image_to_numpy, pose_to_matrix
+from arm_ros.conversions.images import K_from_camera_info, depth_to_metres, image_to_numpy
+from arm_ros.conversions.poses import pose_to_matrix
 from arm_sim import robot
 
 from ros_helpers import spin_until, start_node, stop_node

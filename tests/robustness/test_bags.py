@@ -23,7 +23,8 @@ from arm_bags.bags import (
 from arm_benchmarks import robustness
 from arm_benchmarks.robustness import NodeProcess, Probe, header_at, node_built, tracebacks
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
-from arm_ros.conversions import numpy_to_image, reconstructed_object_msg
+from arm_ros.conversions.images import numpy_to_image
+from arm_ros.conversions.meshes import reconstructed_object_msg
 
 
 def image(stamp_s, value=7, shape=(48, 64, 3)):

@@ -132,7 +132,8 @@ def measure(
     """Per-stage latency of one frame -> meshes on this machine; see the module docstring."""
     from std_msgs.msg import Header
 
-    from arm_reconstruction.messages import frame_from_msg, frame_to_msg, main_table_height, markers_msg, objects_to_msg
+    from arm_reconstruction.messages import main_table_height, markers_msg, objects_to_msg
+    from arm_ros.conversions.frames import frame_from_msg, segmented_frame_msg
 
     torch.set_num_threads(threads)
     scene, frame = simulated_frame(n_objects, seed)
@@ -141,7 +142,7 @@ def measure(
     trained = path.is_file()
     settings = ReconstructionSettings(method=method, checkpoint_path=str(path) if trained else "")
     reconstructor = Reconstructor(settings, model=None if trained else build_model(variant, 32))
-    message = frame_to_msg(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, Header())
+    message = segmented_frame_msg(frame, Header())
 
     stage_samples = {stage: [] for stage in ("decode", *STAGES, "encode", "total")}
     cpu_samples = []

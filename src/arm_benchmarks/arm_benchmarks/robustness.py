@@ -18,16 +18,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from arm_reconstruction.checkpoint import default_checkpoint_path
-from arm_ros.conversions import (
-    ConversionError,
-    K_from_camera_info,
-    camera_info_from_K,
-    image_to_numpy,
-    matrix_to_pose,
-    msg_to_mesh,
-    numpy_to_image,
-    pose_to_matrix,
-)
+from arm_ros.conversions import ConversionError
+from arm_ros.conversions.frames import segmented_frame_msg as frame_to_segmented_msg
+from arm_ros.conversions.images import K_from_camera_info, camera_info_from_K, image_to_numpy, numpy_to_image
+from arm_ros.conversions.meshes import msg_to_mesh
+from arm_ros.conversions.poses import matrix_to_pose, pose_to_matrix
 from arm_ros.processes import NODES, NodeProcess, config_file, executable, node_built, rss_mb  # noqa: F401
 from arm_sim import robot
 
@@ -376,21 +371,9 @@ def camera_messages(
 
 def segmented_frame_msg(frame, stamp_s: float, labels: np.ndarray | None = None):
     """SegmentedFrame of an RgbdFrame with its simulator labels (the ground-truth segmentation)."""
-    from arm_interfaces.msg import SegmentedFrame
-
     labels = frame.labels if labels is None else labels
     header = header_at(stamp_s, "camera_color_optical_frame")
-    h, w = frame.depth_m.shape
-    return SegmentedFrame(
-        header=header,
-        rgb=numpy_to_image(frame.rgb, "rgb8", header),
-        depth=numpy_to_image(frame.depth_m, "32FC1", header),
-        camera_info=camera_info_from_K(frame.K, w, h, header),
-        camera_pose=matrix_to_pose(frame.T_world_camera),
-        world_frame_id="world",
-        labels=numpy_to_image(labels.astype(np.uint16), "16UC1", header),
-        instance_ids=[int(i) for i in np.unique(labels) if i > 0],
-    )
+    return frame_to_segmented_msg(dataclasses.replace(frame, labels=labels, world_frame_id="world"), header)
 
 
 def joint_state_msg(stamp_s: float = 0.0, q=None, opening_m: float = 0.04) -> JointState:

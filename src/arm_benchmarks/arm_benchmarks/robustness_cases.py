@@ -31,7 +31,9 @@ from arm_benchmarks.robustness import (
     tracebacks,
     trajectory_problems,
 )
-from arm_ros.conversions import matrix_to_pose, mesh_to_msg, numpy_to_image
+from arm_ros.conversions.images import numpy_to_image
+from arm_ros.conversions.meshes import mesh_to_msg
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_sim import robot
 
 

@@ -31,13 +31,9 @@ from arm_core.camera import look_at  # noqa: E402
 from arm_interfaces.action import Manipulate  # noqa: E402
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame  # noqa: E402
 from arm_ros.common import latched_qos, sensor_qos  # noqa: E402
-from arm_ros.conversions import (  # noqa: E402
-    K_from_camera_info,
-    depth_to_metres,
-    image_to_numpy,
-    pose_to_matrix,
-    reconstructed_object_from_msg,
-)
+from arm_ros.conversions.images import K_from_camera_info, depth_to_metres, image_to_numpy  # noqa: E402
+from arm_ros.conversions.meshes import reconstructed_object_from_msg  # noqa: E402
+from arm_ros.conversions.poses import pose_to_matrix  # noqa: E402
 from arm_sim.objects import ObjectModel  # noqa: E402
 from arm_sim.scenes import PlacedObject, Scene  # noqa: E402
 from arm_sim.world import ROBOT_BASE_XY, SimWorld  # noqa: E402

@@ -10,7 +10,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from arm_interfaces.action import Manipulate
 from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE
 from arm_planner.twin import TwinObject
-from arm_ros.conversions import ConversionError, msg_to_mesh, pose_to_matrix
+from arm_ros.conversions import ConversionError
+from arm_ros.conversions.meshes import msg_to_mesh
+from arm_ros.conversions.poses import pose_to_matrix
 
 TASK_NAMES = {
     Manipulate.Goal.TASK_GRASP: TASK_GRASP,

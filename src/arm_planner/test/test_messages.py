@@ -5,7 +5,9 @@ from shape_msgs.msg import Mesh, MeshTriangle
 
 from arm_interfaces.msg import ReconstructedObject, ReconstructedObjectArray
 from arm_planner.messages import joint_state_arrays, trajectory_msg, twin_objects_from_msg
-from arm_ros.conversions import ConversionError, matrix_to_pose, mesh_to_msg
+from arm_ros.conversions import ConversionError
+from arm_ros.conversions.meshes import mesh_to_msg
+from arm_ros.conversions.poses import matrix_to_pose
 
 
 def _box_msg():

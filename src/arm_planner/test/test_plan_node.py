@@ -18,7 +18,8 @@ from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObject, ReconstructedObjectArray
 from arm_planner.plan_node import PlanNode
 from arm_ros.common import latched_qos
-from arm_ros.conversions import matrix_to_pose, mesh_to_msg
+from arm_ros.conversions.meshes import mesh_to_msg
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_sim import robot
 
 

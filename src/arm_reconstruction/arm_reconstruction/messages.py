@@ -1,7 +1,7 @@
-"""Pipeline objects <-> ROS messages (message classes only, no rclpy: testable without a ROS graph)."""
+"""Reconstructed objects <-> ROS messages: ReconstructedObject(Array) and RViz markers (message
+classes only, no rclpy: testable without a ROS graph). Frames are decoded by arm_ros.conversions.frames."""
 
 import colorsys
-from dataclasses import dataclass
 
 import numpy as np
 import trimesh
@@ -9,78 +9,15 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from arm_interfaces.msg import GridMetadata, ReconstructedObjectArray, SegmentedFrame
+from arm_interfaces.msg import GridMetadata, ReconstructedObjectArray
 from arm_interfaces.msg import ReconstructedObject as ReconstructedObjectMsg
-from arm_ros.conversions import (
-    ConversionError,
-    K_from_camera_info,
-    camera_info_from_K,
-    depth_to_metres,
-    image_to_numpy,
-    matrix_to_pose,
-    msg_to_mesh,
-    numpy_to_image,
-    object_msg,
-    pose_to_matrix,
-)
+from arm_ros.conversions.meshes import object_msg, reconstructed_object_from_msg
+from arm_ros.conversions.poses import matrix_to_pose
 
 from .grid import GridFrame
 from .pipeline import ReconstructedObject
 
 MARKER_NAMESPACE = "arm_meshes"
-
-
-@dataclass
-class FrameData:
-    """A SegmentedFrame as arrays: rgb uint8 HxWx3 (None when absent), depth_m float32 HxW (0 = no
-    return), K 3x3, T_world_camera 4x4, labels uint16 HxW."""
-
-    rgb: np.ndarray | None
-    depth_m: np.ndarray
-    K: np.ndarray
-    T_world_camera: np.ndarray
-    labels: np.ndarray
-    instance_ids: list[int]
-    world_frame_id: str
-
-
-def frame_from_msg(msg: SegmentedFrame) -> FrameData:
-    """SegmentedFrame -> FrameData. Raises ConversionError on any malformed field."""
-    depth_m = depth_to_metres(msg.depth)
-    if msg.labels.encoding not in ("16UC1", "mono16"):
-        raise ConversionError(f"labels encoding must be 16UC1, got '{msg.labels.encoding}'")
-    labels = image_to_numpy(msg.labels)
-    if labels.shape != depth_m.shape:
-        raise ConversionError(f"labels {labels.shape} and depth {depth_m.shape} differ in size")
-    rgb = None
-    if msg.rgb.height and msg.rgb.width:
-        rgb = image_to_numpy(msg.rgb)
-        if rgb.shape[:2] != depth_m.shape:
-            raise ConversionError(f"rgb {rgb.shape[:2]} and depth {depth_m.shape} differ in size")
-    K = K_from_camera_info(msg.camera_info)
-    info_size = (int(msg.camera_info.height), int(msg.camera_info.width))
-    if info_size != (0, 0) and info_size != depth_m.shape:
-        raise ConversionError(f"camera_info size {info_size} differs from depth {depth_m.shape}")
-    T_world_camera = pose_to_matrix(msg.camera_pose)
-    return FrameData(rgb, depth_m, K, T_world_camera, labels, [int(i) for i in msg.instance_ids], msg.world_frame_id)
-
-
-def frame_to_msg(rgb, depth_m, K, T_world_camera, labels, header=None, world_frame_id: str = "world") -> SegmentedFrame:
-    """Arrays -> SegmentedFrame (what arm_segmentation publishes; used by tools and tests)."""
-    msg = SegmentedFrame()
-    if header is not None:
-        msg.header = header
-    depth_m = np.asarray(depth_m, dtype=np.float32)
-    if rgb is not None:
-        msg.rgb = numpy_to_image(np.asarray(rgb, dtype=np.uint8), "rgb8", msg.header)
-    msg.depth = numpy_to_image(depth_m, "32FC1", msg.header)
-    msg.camera_info = camera_info_from_K(K, depth_m.shape[1], depth_m.shape[0], msg.header)
-    msg.camera_pose = matrix_to_pose(T_world_camera)
-    msg.world_frame_id = world_frame_id
-    labels = np.asarray(labels, dtype=np.uint16)
-    msg.labels = numpy_to_image(labels, "16UC1", msg.header)
-    msg.instance_ids = [int(i) for i in np.unique(labels) if i > 0]
-    return msg
 
 
 def grid_to_msg(frame: GridFrame | None) -> GridMetadata:
@@ -110,13 +47,12 @@ def object_to_msg(obj: ReconstructedObject) -> ReconstructedObjectMsg:
 
 def object_from_msg(msg: ReconstructedObjectMsg) -> ReconstructedObject:
     """ReconstructedObject message -> pipeline object (object frame meshes). Raises ConversionError."""
-    vertices, faces = msg_to_mesh(msg.mesh)
-    parts = [trimesh.Trimesh(*msg_to_mesh(p), process=False) for p in msg.convex_parts]
+    T_world_object, (vertices, faces), parts = reconstructed_object_from_msg(msg)
     return ReconstructedObject(
         int(msg.id),
-        pose_to_matrix(msg.pose),
+        T_world_object,
         trimesh.Trimesh(vertices, faces, process=False),
-        parts,
+        [trimesh.Trimesh(v, f, process=False) for v, f in parts],
         float(msg.visible_fraction),
         grid_from_msg(msg.grid),
         msg.method,

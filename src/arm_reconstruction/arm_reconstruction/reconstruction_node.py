@@ -27,10 +27,11 @@ from arm_ros.common import (
     sensor_qos,
 )
 from arm_ros.conversions import ConversionError
+from arm_ros.conversions.frames import frame_from_msg
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
-from .messages import frame_from_msg, main_table_height, markers_msg, objects_to_msg
+from .messages import main_table_height, markers_msg, objects_to_msg
 from .network import METHODS
 from .pipeline import STAGES, ReconstructionSettings, Reconstructor
 

@@ -16,8 +16,6 @@ from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_reconstruction.checkpoint import save_checkpoint
 from arm_reconstruction.grid import voxelize_mesh
 from arm_reconstruction.messages import (
-    frame_from_msg,
-    frame_to_msg,
     markers_msg,
     object_from_msg,
     object_to_msg,
@@ -28,6 +26,7 @@ from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor
 from arm_reconstruction.reconstruction_node import ReconstructionNode
 from arm_ros.common import latched_qos
 from arm_ros.conversions import ConversionError
+from arm_ros.conversions.frames import frame_from_msg, segmented_frame_msg
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld
@@ -56,7 +55,7 @@ def checkpoint(tmp_path_factory):
 
 
 def frame_msg(frame):
-    return frame_to_msg(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, Header(frame_id="cam"))
+    return segmented_frame_msg(frame, Header(frame_id="cam"))
 
 
 def test_messages_round_trip(sim, checkpoint):

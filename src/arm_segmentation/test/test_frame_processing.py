@@ -4,7 +4,8 @@ from geometry_msgs.msg import PoseStamped
 from seg_fixtures import Box, add_noise, look_at, render
 from std_msgs.msg import Header
 
-from arm_ros.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image
+from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.frame_processing import FrameError, segment_messages
 from arm_segmentation.metrics import segmentation_metrics
 

@@ -20,7 +20,8 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
-from arm_ros.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image  # noqa: E402
+from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image  # noqa: E402
+from arm_ros.conversions.poses import matrix_to_pose  # noqa: E402
 from arm_ros.processes import config_file, executable  # noqa: E402
 from arm_segmentation.metrics import segmentation_metrics  # noqa: E402
 

@@ -1,28 +1,13 @@
-"""Simulated camera: rendered frames and the benchmark's camera-pose sampling.
+"""Simulated camera: the optical-to-MuJoCo camera axes and the benchmark's camera-pose sampling.
 
 MuJoCo cameras look along their -z with +y up, i.e. R_world_mjcam = R_world_camera @ diag(1, -1, -1).
 """
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from arm_core.camera import look_at
 
 OPTICAL_TO_MUJOCO = np.diag([1.0, -1.0, -1.0])
-
-
-@dataclass
-class RgbdFrame:
-    """One rendered frame. labels: 0 background/table, i + 1 = scene object i."""
-
-    rgb: np.ndarray
-    depth_m: np.ndarray
-    labels: np.ndarray
-    K: np.ndarray
-    T_world_camera: np.ndarray
-    visible_fraction: np.ndarray
-    stamp_s: float = 0.0
 
 
 def sample_camera_pose(

@@ -20,7 +20,9 @@ from arm_ros.common import (
     run_node,
     sensor_qos,
 )
-from arm_ros.conversions import camera_info_from_K, matrix_to_pose, numpy_to_image, reconstructed_object_msg
+from arm_ros.conversions.images import camera_info_from_K, numpy_to_image
+from arm_ros.conversions.meshes import reconstructed_object_msg
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_sim import robot
 from arm_sim.core import SimSession, trajectory_targets
 

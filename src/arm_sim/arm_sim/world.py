@@ -4,8 +4,9 @@ import mujoco
 import numpy as np
 
 from arm_core.camera import intrinsics, silhouette
+from arm_core.frames import RgbdFrame
 from arm_sim import robot
-from arm_sim.camera import OPTICAL_TO_MUJOCO, RgbdFrame
+from arm_sim.camera import OPTICAL_TO_MUJOCO
 from arm_sim.depth_noise import DepthNoise, apply_depth_noise
 
 RENDER_CAMERA = "render_camera"
@@ -199,7 +200,8 @@ class SimWorld:
         visible = (
             self.visible_fractions(labels, T_world_camera) if with_visibility else np.full(len(self.object_ids), -1.0)
         )
-        return RgbdFrame(rgb, depth, labels, self.K.copy(), np.array(T_world_camera, float), visible, stamp_s)
+        T = np.array(T_world_camera, float)
+        return RgbdFrame(rgb, depth, self.K.copy(), T, labels, stamp_s=stamp_s, visible_fraction=visible)
 
     def visible_fractions(self, labels: np.ndarray, T_world_camera: np.ndarray) -> np.ndarray:
         """Visible pixels over the pixels each object covers when rendered alone (its convex parts,
