@@ -128,6 +128,8 @@ def _plane_decomposition(solid: manifold3d.Manifold, settings: DecompositionSett
 
 
 def _coacd_decomposition(mesh: trimesh.Trimesh, settings: DecompositionSettings) -> list[np.ndarray]:
+    # Imported here: CoACD is an optional backend (not the default 'planes') and its import takes
+    # ~0.1 s (python -X importtime), which every reconstruction_node start would pay.
     import coacd
 
     coacd.set_log_level("error")

@@ -15,6 +15,8 @@ import numpy as np
 import torch
 import trimesh
 
+from arm_core.camera import silhouette
+
 from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
 from .convex_parts import ConvexDecomposer, DecompositionSettings
 from .grid import DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
@@ -144,8 +146,6 @@ def _object_pose(mesh: trimesh.Trimesh) -> np.ndarray:
 def estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera) -> float:
     """Visible pixels of the object over the pixels its reconstruction (convex parts, (N, 3) world vertex
     arrays) covers alone (clipped to 1; -1 when it projects to no pixel)."""
-    from arm_core.camera import silhouette
-
     height, width = labels.shape
     alone = silhouette(parts_world, K, T_world_camera, width, height).sum()
     if alone == 0:

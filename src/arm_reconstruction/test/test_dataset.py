@@ -7,6 +7,7 @@ import torch
 from arm_reconstruction import datagen
 from arm_reconstruction.datagen import pack_bits
 from arm_reconstruction.dataset import DatasetError, VoxelDataset, random_symmetry, unpack_bits, verify_manifest
+from arm_reconstruction.train import TrainConfig
 
 
 def box_samples(n: int, resolution: int, rng: np.random.Generator) -> dict:
@@ -42,8 +43,6 @@ def box_samples(n: int, resolution: int, rng: np.random.Generator) -> dict:
 
 def tiny_train_config(data_root, out_path, variant="arm", steps=3, **overrides):
     """A TrainConfig for a few CPU steps of a small network on a box dataset (tests only)."""
-    from arm_reconstruction.train import TrainConfig
-
     values = dict(
         variant=variant,
         data=str(data_root),

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from arm_core.camera import look_at
 from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import (
     add_missed_observed_voxels,
@@ -25,8 +26,6 @@ def sim_frame():
     rng = np.random.default_rng(3)
     scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=6)
     world = SimWorld(scene, robot_arm=False, width=320, height=240)
-    from arm_core.camera import look_at
-
     frame = world.render(look_at((0.7, 0.3, 0.5), scene.objects[0].T_world_object[:3, 3]), rng=rng)
     world.close()
     grids = frame_grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels)

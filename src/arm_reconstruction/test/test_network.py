@@ -1,3 +1,5 @@
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -9,6 +11,7 @@ from arm_reconstruction.network import (
     canonical_method,
     model_config,
     predict_occupancy,
+    prepare_for_inference,
 )
 
 torch.set_num_threads(2)
@@ -79,10 +82,6 @@ def test_cuda_matches_cpu():
 
 
 def test_inference_preparation_keeps_the_outputs():
-    import copy
-
-    from arm_reconstruction.network import prepare_for_inference
-
     model = build_model("arm", 16)
     grids = (np.random.default_rng(3).random((3, 4, 16, 16, 16)) > 0.5).astype(np.float32)
     before = predict_occupancy(model, grids)

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 import torch
+from test_dataset import tiny_train_config, write_box_dataset
 
 from arm_core.camera import look_at
 from arm_core.frames import FrameInputError
@@ -10,6 +11,7 @@ from arm_reconstruction.grid import GridInputError, voxelize_mesh
 from arm_reconstruction.meshing import to_manifold
 from arm_reconstruction.network import build_model
 from arm_reconstruction.pipeline import STAGES, ReconstructionSettings, Reconstructor, reconstruct
+from arm_reconstruction.train import train
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld
@@ -142,10 +144,6 @@ def test_one_call_api(sim, checkpoints):
 
 @pytest.mark.slow
 def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path):
-    from test_dataset import tiny_train_config, write_box_dataset
-
-    from arm_reconstruction.train import train
-
     write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0)
     write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1)
     train(tiny_train_config(tmp_path, tmp_path / "arm.pt", "arm", steps=2), progress=False)

@@ -9,7 +9,8 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 
@@ -137,9 +138,6 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     ParameterException, raised by declare_parameter on a range or type violation) exits with code 2
     and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
     or take in flight end the process cleanly (exit code 0)."""
-    from rclpy.exceptions import ParameterException
-    from rclpy.executors import SingleThreadedExecutor
-
     rclpy.init(args=args)
     node = None
     code = 0
