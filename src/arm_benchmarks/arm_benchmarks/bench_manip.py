@@ -31,7 +31,7 @@ from tqdm import tqdm
 from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, write_report
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
 from arm_core.run_key import run_key
-from arm_core.stats import json_safe
+from arm_core.stats import json_safe, median
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
@@ -159,7 +159,7 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
             observations=run.observations,
         )
         if outcome.result is not None and len(outcome.result.step_ms):
-            row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
+            row["mppi_step_ms"] = median(outcome.result.step_ms)
             row["plan_steps"] = len(outcome.result.times_s)
         if session.twin is not None:
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)

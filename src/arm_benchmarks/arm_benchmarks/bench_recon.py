@@ -18,8 +18,12 @@ moved less than --stable-threshold-m. The true meshes go through the same path a
 counts in its IoU as 0 and as not stable, and is left out of its Chamfer mean (counted as empty).
 
 Per-scene results are cached under OUT/cache/<run key>/ (arm_core.run_key: settings, checkpoints and
-the source of every package a result depends on), so an interrupted run resumes. Writes OUT/summary.json, OUT/report.md,
-OUT/chamfer_by_visibility.png, OUT/stability.png and OUT/qualitative.png.
+the source of every package a result depends on), so an interrupted run resumes. Writes
+OUT/summary.json, OUT/report.md, OUT/chamfer_by_visibility.png, OUT/stability.png and
+OUT/qualitative.png.
+
+Modules: arm_benchmarks.recon.{config, scenes, matching, physics, scoring, cache, summary, plots,
+report}; this one is the command line and the driver.
 """
 
 from __future__ import annotations

@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_benchmarks.bench_manip import GOALS, ground_truth_objects
+from arm_core.stats import median, percentile
 from arm_planner.mppi import STATE_SPEC, BatchedRollout, MppiConfig, free_body_trees, set_sleep
 from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
@@ -64,7 +65,7 @@ def mppi_step_ms(objects, table_height_m, target_id, twin_step_s=0.01, steps=60)
     session, outcome = _plan(objects, table_height_m, target_id, "grasp", (0, 0, 0), twin_step_s, steps)
     if not outcome.planned:
         raise RuntimeError(f"perf plan failed: {outcome.message}")
-    return float(np.median(outcome.result.step_ms[5:])), (session, outcome)
+    return median(outcome.result.step_ms[5:]), (session, outcome)
 
 
 def rollout_scaling(session, outcome, paths=(25, 50, 100), horizons=(5, 10), threads=(1, 2), repeats=5) -> list:
@@ -177,8 +178,8 @@ def measure(n_objects: int = 10, seed: int = 0) -> dict:
     load_before = os.getloadavg()[0]
     figures = {
         "mppi_step_ms": step_ms,
-        "mppi_step_p90_ms": float(np.percentile(outcome.result.step_ms[5:], 90)),
-        "mppi_step_cpu_ms": float(np.median(outcome.result.step_cpu_ms[5:])),
+        "mppi_step_p90_ms": percentile(outcome.result.step_ms[5:], 90),
+        "mppi_step_cpu_ms": median(outcome.result.step_cpu_ms[5:]),
         "mppi_load_average": load_before,
         "mppi_step_config": "25 paths x horizon 5 x 0.02 s, twin step 0.01 s, 2 threads, "
         f"{len(objects)} objects with <= 8 convex parts, grasp reward",
