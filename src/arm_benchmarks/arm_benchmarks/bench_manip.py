@@ -10,29 +10,42 @@ loop as in the paper with --observe-period 0. Success: grasp lifts the target >=
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
-carries the run key (a digest of the settings, the shipped checkpoints and the source of the packages
-that produce the result); rows with another key are moved to episodes.stale.jsonl, never reused.
+carries the run key (arm_core.run_key: a digest of the settings, the methods' checkpoints and the source
+of the packages that produce the result); rows with another key are moved to episodes.stale.jsonl, never
+reused.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import hashlib
 import json
 import pathlib
 import time
 
+import mujoco
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, write_report
+from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
+from arm_core.run_key import run_key
+from arm_core.stats import json_safe, median
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.session import ManipulationSession
 from arm_planner.twin import TwinObject
 from arm_planner.world_execution import run_in_world
+from arm_reconstruction.checkpoint import default_checkpoint_path
+from arm_reconstruction.network import METHODS
+from arm_reconstruction.pipeline import reconstruct
+from arm_sim import robot
+from arm_sim.depth_noise import DepthNoise
+from arm_sim.objects import object_pool
+from arm_sim.scenes import task_scene
+from arm_sim.world import SimWorld
 
 GOALS = {
     TASK_GRASP: (0.0, 0.0, 0.0),
@@ -40,7 +53,6 @@ GOALS = {
     TASK_REARRANGE: (0.20, 0.20, 0.0),  # 20 cm forward, 20 cm left
 }
 TOLERANCE_M = 0.025
-GROUND_TRUTH = "ground_truth"
 DEFAULT_METHODS = (GROUND_TRUTH, "baseline", "baseline+E", "arm")
 
 
@@ -61,10 +73,6 @@ def plan_episodes(n: int, tasks, bin_indices, seed: int) -> list[Episode]:
 
 def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 3):
     """(scene, target index, frame) for the episode, or raises RuntimeError when the bin is unreachable."""
-    from arm_sim.depth_noise import DepthNoise
-    from arm_sim.scenes import task_scene
-    from arm_sim.world import SimWorld
-
     lo, hi = bins[episode.bin_index]
     last = None
     for attempt in range(tries):
@@ -96,8 +104,6 @@ def ground_truth_objects(scene) -> list[TwinObject]:
 
 
 def reconstructed_objects(method: str, frame) -> list[TwinObject]:
-    from arm_reconstruction.pipeline import reconstruct
-
     objects = reconstruct(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, method=method)
     return [
         TwinObject(o.id, o.T_world_object, o.mesh, o.convex_parts, o.visible_fraction, o.method)
@@ -109,10 +115,6 @@ def reconstructed_objects(method: str, frame) -> list[TwinObject]:
 def target_stability_m(session: ManipulationSession, target_id: int, objects, table_height_m: float) -> float:
     """How far the target's centre moves in 1 s when its twin (objects as viewed, robot still at home)
     settles: 0 = stable."""
-    import mujoco
-
-    from arm_sim import robot
-
     session.set_objects(objects, table_height_m)
     twin = session.twin
     if twin is None or target_id not in twin:
@@ -133,8 +135,6 @@ def target_stability_m(session: ManipulationSession, target_id: int, objects, ta
 
 
 def run_method(method, scene, target_index, frame, task, config, twin_timestep_s, period_steps) -> dict:
-    from arm_sim.world import SimWorld
-
     started = time.perf_counter()
     row = {"method": method}
     try:
@@ -159,7 +159,7 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
             observations=run.observations,
         )
         if outcome.result is not None and len(outcome.result.step_ms):
-            row["mppi_step_ms"] = float(np.median(outcome.result.step_ms))
+            row["mppi_step_ms"] = median(outcome.result.step_ms)
             row["plan_steps"] = len(outcome.result.times_s)
         if session.twin is not None:
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
@@ -171,33 +171,13 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
     return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
 
 
-def _json_safe(value):
-    """NaN (no data) -> null, so summary.json is strict JSON."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
+RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_reconstruction", "arm_planner", "arm_benchmarks")
 
 
-RESULT_PACKAGES = ("arm_planner", "arm_sim", "arm_reconstruction")
-REPORTING_ONLY = ("bench_stats.py",)  # statistics and plots of the rows, not the rows
-
-
-def run_key(settings: dict) -> str:
-    """Digest of the settings, the checkpoints and the Python source of RESULT_PACKAGES."""
-    import importlib
-
-    digest = hashlib.sha1(json.dumps(settings, sort_keys=True).encode())
-    for name in RESULT_PACKAGES:
-        root = pathlib.Path(importlib.import_module(name).__file__).parent
-        for path in sorted(root.rglob("*")):
-            if path.suffix in (".py", ".pt") and path.is_file() and path.name not in REPORTING_ONLY:
-                digest.update(path.relative_to(root).as_posix().encode())
-                digest.update(path.read_bytes())
-    return digest.hexdigest()[:12]
+def result_key(settings: dict) -> str:
+    """Run key of the rows: the settings, the checkpoints of settings["methods"] and RESULT_PACKAGES' source."""
+    variants = {METHODS[m][0] for m in settings.get("methods", ()) if m in METHODS}
+    return run_key(settings, [default_checkpoint_path(v) for v in sorted(variants)], RESULT_PACKAGES)
 
 
 def load_done(path: pathlib.Path, key: str) -> dict:
@@ -207,6 +187,8 @@ def load_done(path: pathlib.Path, key: str) -> dict:
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
+                if row.get("method") in GROUND_TRUTH_ALIASES:  # older files: "ground_truth"
+                    row["method"] = GROUND_TRUTH
                 if row.get("run_key") == key:
                     done[(row["episode"], row["method"])] = row
                 else:
@@ -252,20 +234,12 @@ def main(argv=None) -> int:
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
-    from arm_reconstruction.network import canonical_method
-
     try:
-        args.methods = [
-            GROUND_TRUTH if m.replace("-", "_") == GROUND_TRUTH else canonical_method(m) for m in args.methods
-        ]
+        args.methods = [benchmark_method(m) for m in args.methods]
     except ValueError as error:
         parser.error(f"{error}, or {GROUND_TRUTH}")
 
-    import torch
-
     torch.set_num_threads(2)
-    from arm_sim.objects import object_pool
-
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "episodes.jsonl"
@@ -300,7 +274,7 @@ def main(argv=None) -> int:
         "objects": args.objects or "procedural heldout categories",
         "nthread": args.nthread,
     }
-    key = run_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
+    key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(
         total=n * len(args.methods),
@@ -343,10 +317,10 @@ def main(argv=None) -> int:
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
     summary = summarise(rows, args.methods, args.tasks, BINS, n)
     summary["settings"] = settings | {"run_key": key}
-    (out / "summary.json").write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
+    (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)
     write_report(summary, out)
-    print(json.dumps(_json_safe({m: round(v["success"], 3) for m, v in summary["methods"].items()})))
+    print(json.dumps(json_safe({m: round(v["success"], 3) for m, v in summary["methods"].items()})))
     print(f"[bench_manip] wrote {out / 'summary.json'}, {out / 'report.md'} and plots")
     return 0
 

@@ -6,25 +6,35 @@ by the classic baseline (RANSAC plane + DBSCAN). Both are scored with the UOIS m
 boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12 objects), and timed per frame.
 
 Rendered frames and per-scene scores are kept under OUT/cache/, so an interrupted run resumes where
-it stopped; scores are keyed by a hash of this package's source, so a changed method is scored anew.
+it stopped. Frames are keyed by the run key of the settings and the simulator's source, scores by the
+run key of the settings and the source of the simulator, the segmentation and this package, so changed
+code renders and scores anew (arm_core.run_key).
 Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
 """
 
 import argparse
-import hashlib
 import json
 import os
 import pathlib
 import platform
 import time
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
+from arm_core.run_key import run_key
+from arm_core.stats import mean, median, percentile
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import segment
+from arm_segmentation.visualization import colourise
+from arm_sim.objects import object_pool
+from arm_sim.views import render_benchmark_view
+
+matplotlib.use("Agg")
 
 METHODS = {"arm_default": segment, "baseline_ransac_dbscan": segment_baseline}
 METRIC_KEYS = (
@@ -61,36 +71,37 @@ def parse_args(argv=None):
     return args
 
 
-def config_key(args) -> str:
+FRAME_PACKAGES = ("arm_core", "arm_sim")
+SCORE_PACKAGES = (*FRAME_PACKAGES, "arm_segmentation", "arm_benchmarks")
+
+
+def frame_settings(args) -> dict:
     objects = str(pathlib.Path(args.objects).resolve()) if args.objects else "heldout"
-    text = json.dumps([args.seed, objects, args.min_objects, args.max_objects, not args.no_noise])
-    return hashlib.sha1(text.encode()).hexdigest()[:12]
+    return {
+        "seed": args.seed,
+        "objects": objects,
+        "min_objects": args.min_objects,
+        "max_objects": args.max_objects,
+        "depth_noise": not args.no_noise,
+    }
 
 
-def code_key() -> str:
-    """Hash of the package's source files: cached scores are only reused for identical code."""
-    digest = hashlib.sha1()
-    for path in sorted(pathlib.Path(__file__).parent.glob("*.py")):
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:12]
+def frames_key(args) -> str:
+    """Run key of the rendered frames: settings and the simulator's source."""
+    return run_key(frame_settings(args), packages=FRAME_PACKAGES)
+
+
+def scores_key(args) -> str:
+    """Run key of the per-scene scores: settings, the simulator's, the segmentation's and this package's source."""
+    return run_key(frame_settings(args), packages=SCORE_PACKAGES)
 
 
 def render_scene(index: int, args, pool):
     """Build, settle and render scene `index` (deterministic in seed and index)."""
-    from arm_sim.camera import sample_camera_pose
-    from arm_sim.depth_noise import DepthNoise
-    from arm_sim.scenes import cluttered_scene
-    from arm_sim.world import SimWorld
-
     rng = np.random.default_rng([args.seed, index])
-    n = int(rng.integers(args.min_objects, args.max_objects + 1))
-    scene = cluttered_scene(pool, rng, n_objects=n)
-    world = SimWorld(scene, robot_arm=False)
-    try:
-        camera = sample_camera_pose(rng, scene.table_centre)
-        frame = world.render(camera, noise=DepthNoise(enabled=not args.no_noise), rng=rng, with_visibility=False)
-    finally:
-        world.close()
+    scene, frame = render_benchmark_view(
+        pool, rng, (args.min_objects, args.max_objects), depth_noise=not args.no_noise, with_visibility=False
+    )
     return {
         "rgb": frame.rgb,
         "depth": frame.depth_m,
@@ -134,22 +145,15 @@ def aggregate(rows: list[dict]) -> dict:
         return {}
     out = {}
     for name in METHODS:
-        out[name] = {k: float(np.mean([r[name][k] for r in rows])) for k in METRIC_KEYS}
+        out[name] = {k: mean([r[name][k] for r in rows]) for k in METRIC_KEYS}
         latencies = [r[name]["latency_ms"] for r in rows]
-        out[name]["latency_ms_median"] = float(np.median(latencies))
-        out[name]["latency_ms_p90"] = float(np.percentile(latencies, 90))
-        out[name]["cpu_ms_median"] = float(np.median([r[name].get("cpu_ms", np.nan) for r in rows]))
+        out[name]["latency_ms_median"] = median(latencies)
+        out[name]["latency_ms_p90"] = percentile(latencies, 90)
+        out[name]["cpu_ms_median"] = median([r[name].get("cpu_ms", np.nan) for r in rows])
     return out
 
 
 def write_examples(path: pathlib.Path, frames: list, titles: list[str]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from arm_segmentation.visualization import colourise
-
     columns = ["RGB", "ground truth", "arm_default", "baseline_ransac_dbscan"]
     fig, axes = plt.subplots(len(frames), 4, figsize=(16, 3.1 * len(frames)), squeeze=False)
     for row, (frame, title) in enumerate(zip(frames, titles, strict=True)):
@@ -169,11 +173,6 @@ def write_examples(path: pathlib.Path, frames: list, titles: list[str]) -> None:
 
 
 def write_metric_plot(path: pathlib.Path, subsets: dict) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     keys = ("overlap_f", "boundary_f", "f_at_75")
     fig, axes = plt.subplots(1, len(subsets), figsize=(6 * len(subsets), 4), squeeze=False)
     for ax, (subset, stats) in zip(axes[0], subsets.items(), strict=True):
@@ -234,10 +233,9 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
 def main(argv=None) -> int:
     args = parse_args(argv)
     out = pathlib.Path(args.out)
-    key = config_key(args)
-    frames_dir = out / "cache" / key
+    frames_dir = out / "cache" / frames_key(args)
     frames_dir.mkdir(parents=True, exist_ok=True)
-    scores_path = frames_dir / f"scores_{code_key()}.jsonl"
+    scores_path = frames_dir / f"scores_{scores_key(args)}.jsonl"
     done = {}
     if scores_path.exists():
         for line in scores_path.read_text().splitlines():
@@ -248,8 +246,6 @@ def main(argv=None) -> int:
 
     def pool_factory():
         if "pool" not in pool_cache:
-            from arm_sim.objects import object_pool
-
             pool_cache["pool"] = object_pool(args.objects, split="heldout", seed=args.seed)
         return pool_cache["pool"]
 

@@ -1,16 +1,22 @@
-"""Success rates with 90% Wilson intervals, plots and the report of bench_manip."""
+"""Success rates with 90% Wilson intervals (arm_core.stats), plots and the report of bench_manip."""
 
 from __future__ import annotations
 
 import math
 import pathlib
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
+
+from arm_benchmarks.methods import GROUND_TRUTH
+from arm_core.stats import median, rate, wilson_interval
+
+matplotlib.use("Agg")
 
 # The paper's eleven visibility levels: [0, 0.1), ..., [0.9, 1.0) and unoccluded (1.0).
 BINS = tuple((round(0.1 * i, 1), round(0.1 * (i + 1), 1)) for i in range(10)) + ((0.995, 1.01),)
 STABILITY_BINS_M = (0.0, 0.005, 0.02, 0.05, float("inf"))
-Z_90 = 1.6448536269514722
 
 
 def bin_label(bounds) -> str:
@@ -18,27 +24,11 @@ def bin_label(bounds) -> str:
     return "1.0" if lo >= 0.99 else f"{lo:.1f}-{hi:.1f}"
 
 
-def wilson(successes: int, n: int, z: float = Z_90) -> tuple[float, float, float]:
-    """(rate, low, high) with the Wilson score interval; nan for n = 0."""
-    if n == 0:
-        return float("nan"), float("nan"), float("nan")
-    p = successes / n
-    denominator = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denominator
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
-    # The interval contains p; at p = 0 or 1 rounding could put its end a hair past it.
-    return p, min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
-
-
 def _rate(rows) -> dict:
     n = len(rows)
     k = sum(bool(r["success"]) for r in rows)
-    rate, low, high = wilson(k, n)
-    return {"rate": rate, "ci90": [low, high], "n": n}
-
-
-def _median(values) -> float:
-    return float(np.median(values)) if len(values) else float("nan")
+    low, high = wilson_interval(k, n)
+    return {"rate": rate(k, n), "ci90": [low, high], "n": n}
 
 
 def counted(rows) -> list[dict]:
@@ -66,7 +56,7 @@ def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
             "by_visibility_ci90": {b: v["ci90"] for b, v in by_bin.items()},
             "by_visibility_n": {b: v["n"] for b, v in by_bin.items()},
             "predicted_success": _rate([{"success": r.get("predicted_success", False)} for r in mine])["rate"],
-            "median_mppi_step_ms": _median([r["mppi_step_ms"] for r in mine if "mppi_step_ms" in r]),
+            "median_mppi_step_ms": median([r["mppi_step_ms"] for r in mine if "mppi_step_ms" in r]),
         }
         if unavailable:
             summary["methods"][method]["unavailable"] = unavailable
@@ -77,12 +67,12 @@ def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
 def _targets(summary) -> dict:
     methods = summary["methods"]
 
-    def rate(m):
+    def success(m):
         return methods.get(m, {}).get("success", float("nan"))
 
-    checks = {"ground_truth_success": rate("ground_truth")}
-    if "arm" in methods and "baseline" in methods and rate("baseline") > 0:
-        checks["arm_over_baseline"] = rate("arm") / rate("baseline")
+    checks = {"ground_truth_success": success(GROUND_TRUTH)}
+    if "arm" in methods and "baseline" in methods and success("baseline") > 0:
+        checks["arm_over_baseline"] = success("arm") / success("baseline")
     if "arm" in methods:
         vis = methods["arm"]["by_visibility"]
         if vis.get("1.0", 0) and not math.isnan(vis.get("1.0", float("nan"))):
@@ -91,11 +81,6 @@ def _targets(summary) -> dict:
 
 
 def write_plots(rows, summary, methods, bins, out: pathlib.Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     methods = [m for m in methods if summary["methods"][m]["n"] > 0] or list(methods)
     labels = [bin_label(b) for b in bins]
     x = np.arange(len(labels))
@@ -135,7 +120,8 @@ def write_plots(rows, summary, methods, bins, out: pathlib.Path) -> None:
         rates, errs = [], []
         for i in range(len(edges) - 1):
             sel = [r for r in mine if edges[i] <= r["target_stability_m"] < edges[i + 1]]
-            p, lo, hi = wilson(sum(bool(r["success"]) for r in sel), len(sel))
+            k = sum(bool(r["success"]) for r in sel)
+            p, (lo, hi) = rate(k, len(sel)), wilson_interval(k, len(sel))
             rates.append(p)
             errs.append((p - lo, hi - p))
         rates = np.array(rates, dtype=float)

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 
@@ -19,18 +20,21 @@ import mujoco
 import numpy as np
 from tqdm import tqdm
 
+from arm_benchmarks.bench_manip import GOALS, ground_truth_objects
+from arm_core.stats import median, percentile
 from arm_planner.mppi import STATE_SPEC, BatchedRollout, MppiConfig, free_body_trees, set_sleep
 from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
-from arm_planner.twin import TwinObject, decompose
+from arm_planner.twin import Twin, TwinObject, decompose
+from arm_sim import robot
+from arm_sim.objects import object_pool
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
 
 TWIN_STEPS_S = (0.002, 0.004, 0.01, 0.02)
 
 
 def _scene(n_objects: int, seed: int):
-    from arm_sim.objects import object_pool
-    from arm_sim.scenes import cluttered_scene
-
     rng = np.random.default_rng(seed)
     return cluttered_scene(object_pool(split="heldout"), rng, n_objects=n_objects)
 
@@ -49,8 +53,6 @@ def _central_object(scene) -> int:
 
 
 def _plan(objects, table_height_m, target_id, task, displacement, twin_step_s, steps, nthread=2):
-    from arm_sim import robot
-
     config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=nthread))
     session = ManipulationSession(config, twin_step_s)
     session.set_objects(objects, table_height_m)
@@ -63,7 +65,7 @@ def mppi_step_ms(objects, table_height_m, target_id, twin_step_s=0.01, steps=60)
     session, outcome = _plan(objects, table_height_m, target_id, "grasp", (0, 0, 0), twin_step_s, steps)
     if not outcome.planned:
         raise RuntimeError(f"perf plan failed: {outcome.message}")
-    return float(np.median(outcome.result.step_ms[5:])), (session, outcome)
+    return median(outcome.result.step_ms[5:]), (session, outcome)
 
 
 def rollout_scaling(session, outcome, paths=(25, 50, 100), horizons=(5, 10), threads=(1, 2), repeats=5) -> list:
@@ -71,8 +73,6 @@ def rollout_scaling(session, outcome, paths=(25, 50, 100), horizons=(5, 10), thr
     twin, planner = session.twin, session.planner
     model = twin.model
     data = mujoco.MjData(model)
-    from arm_sim import robot
-
     set_sleep(model, free_body_trees(model), start_asleep=True)
     mujoco.mj_setState(model, data, twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M), STATE_SPEC)
     controls = outcome.result.controls
@@ -115,9 +115,6 @@ def _state(model, data) -> np.ndarray:
 
 def _replay_twin(objects, table_height_m, target_id, twin_step_s, controls) -> np.ndarray:
     """Target centre displacement after replaying controls open loop in a twin with this step."""
-    from arm_planner.twin import Twin
-    from arm_sim import robot
-
     twin = Twin(objects, table_height_m, twin_step_s)
     model = twin.model
     data = mujoco.MjData(model)
@@ -134,8 +131,6 @@ def _replay_twin(objects, table_height_m, target_id, twin_step_s, controls) -> n
 
 
 def _replay_world(scene, target_index, result) -> np.ndarray:
-    from arm_sim.world import SimWorld
-
     world = SimWorld(scene, robot_arm=True)
     body = world.object_ids[target_index]
     start = world.data.xipos[body].copy()
@@ -147,8 +142,6 @@ def _replay_world(scene, target_index, result) -> np.ndarray:
 
 def timestep_fidelity(scene, seeds=(0, 1), steps=200) -> list:
     """Per twin step: MPPI step ms and |twin - world| of the target's final displacement over plans."""
-    from arm_benchmarks.bench_manip import GOALS, ground_truth_objects
-
     objects = ground_truth_objects(scene)
     target = _central_object(scene)
     plans = []
@@ -185,8 +178,8 @@ def measure(n_objects: int = 10, seed: int = 0) -> dict:
     load_before = os.getloadavg()[0]
     figures = {
         "mppi_step_ms": step_ms,
-        "mppi_step_p90_ms": float(np.percentile(outcome.result.step_ms[5:], 90)),
-        "mppi_step_cpu_ms": float(np.median(outcome.result.step_cpu_ms[5:])),
+        "mppi_step_p90_ms": percentile(outcome.result.step_ms[5:], 90),
+        "mppi_step_cpu_ms": median(outcome.result.step_cpu_ms[5:]),
         "mppi_load_average": load_before,
         "mppi_step_config": "25 paths x horizon 5 x 0.02 s, twin step 0.01 s, 2 threads, "
         f"{len(objects)} objects with <= 8 convex parts, grasp reward",
@@ -199,8 +192,6 @@ def measure(n_objects: int = 10, seed: int = 0) -> dict:
 
 
 def main() -> int:
-    import json
-
     print(json.dumps(measure(), indent=2))
     return 0
 

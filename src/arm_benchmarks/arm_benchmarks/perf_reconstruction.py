@@ -15,54 +15,58 @@ import pathlib
 import platform
 import time
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from std_msgs.msg import Header
 from tqdm import tqdm
 
+from arm_core.camera import look_at
+from arm_core.stats import median
 from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings, decomposition_iou
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
+from arm_reconstruction.messages import main_table_height, markers_msg, objects_to_msg
 from arm_reconstruction.network import METHODS, build_model, predict_occupancy, prepare_for_inference
 from arm_reconstruction.pipeline import STAGES, ReconstructionSettings, Reconstructor
+from arm_ros.conversions.frames import frame_from_msg, segmented_frame_msg
+from arm_sim.objects import object_pool
+from arm_sim.views import BenchmarkScene
+
+matplotlib.use("Agg")
 
 MIN_VISIBLE_PIXELS = 150
 
 
 def simulated_frame(n_objects: int = 10, seed: int = 0, width: int = 640, height: int = 480, max_tries: int = 40):
     """A settled cluttered scene and a noisy RGB-D frame in which all n_objects are visible."""
-    from arm_core.camera import look_at
-    from arm_sim.objects import object_pool
-    from arm_sim.scenes import cluttered_scene
-    from arm_sim.world import SimWorld
-
     rng = np.random.default_rng(seed)
     pool = object_pool(split="heldout", seed=seed)
     best = None
     for _ in range(max_tries):
-        scene = cluttered_scene(pool, rng, n_objects=n_objects)
-        if len(scene.objects) < n_objects:
-            continue
-        centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
-        world = SimWorld(scene, robot_arm=False, width=width, height=height)
-        for _ in range(4):
-            azimuth = rng.uniform(0, 2 * np.pi)
-            eye = centre + np.array([0.55 * np.cos(azimuth), 0.55 * np.sin(azimuth), rng.uniform(0.45, 0.7)])
-            frame = world.render(look_at(eye, centre), rng=rng)
-            counts = np.bincount(frame.labels.ravel(), minlength=n_objects + 1)[1 : n_objects + 1]
-            visible = int(np.sum(counts >= MIN_VISIBLE_PIXELS))
-            if best is None or visible > best[0]:
-                best = (visible, scene, frame)
-            if visible == n_objects:
-                world.close()
-                return scene, frame
-        world.close()
+        with BenchmarkScene(pool, rng, n_objects, width=width, height=height) as views:
+            scene = views.scene
+            if len(scene.objects) < n_objects:
+                continue
+            centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
+            for _ in range(4):
+                azimuth = rng.uniform(0, 2 * np.pi)
+                eye = centre + np.array([0.55 * np.cos(azimuth), 0.55 * np.sin(azimuth), rng.uniform(0.45, 0.7)])
+                frame = views.render(look_at(eye, centre))
+                counts = np.bincount(frame.labels.ravel(), minlength=n_objects + 1)[1 : n_objects + 1]
+                visible = int(np.sum(counts >= MIN_VISIBLE_PIXELS))
+                if best is None or visible > best[0]:
+                    best = (visible, scene, frame)
+                if visible == n_objects:
+                    return scene, frame
     if best is None:
         raise RuntimeError("could not build a scene")
     return best[1], best[2]
 
 
 def _median_ms(samples: list[float]) -> float:
-    return float(np.median(samples) * 1000.0)
+    return median(samples) * 1000.0
 
 
 def _time_network(variant: str, resolution: int, grids: np.ndarray, repeats: int) -> float:
@@ -130,11 +134,6 @@ def measure(
     resolutions=(32, 64),
 ) -> dict:
     """Per-stage latency of one frame -> meshes on this machine; see the module docstring."""
-    from std_msgs.msg import Header
-
-    from arm_reconstruction.messages import main_table_height, markers_msg, objects_to_msg
-    from arm_ros.conversions.frames import frame_from_msg, segmented_frame_msg
-
     torch.set_num_threads(threads)
     scene, frame = simulated_frame(n_objects, seed)
     variant = METHODS[method][0]
@@ -206,7 +205,7 @@ def measure(
         "network_ms_per_object": stages_ms["network"] / n,
         "decomposition_ms_per_object": stages_ms["decomposition"] / max(len(meshes), 1),
         "frame_to_meshes_s": stages_ms["total"] / 1000.0,
-        "frame_process_cpu_s": float(np.median(cpu_samples)),
+        "frame_process_cpu_s": median(cpu_samples),
         "stages_ms": stages_ms,
         "stages_process_cpu_ms": {stage: _median_ms(samples) for stage, samples in stage_cpu_samples.items()},
         "objects_ok": len(meshes),
@@ -218,11 +217,6 @@ def measure(
 
 def write_report(result: dict, out_dir="results/perf") -> None:
     """Merge the figures into out_dir/summary.json and write reconstruction.md and reconstruction_stages.png."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary_path = out / "summary.json"

@@ -6,24 +6,19 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from arm_core.stats import median
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.segmentation import segment
+from arm_sim.objects import object_pool
+from arm_sim.views import render_benchmark_view
 
 
 def _frames(n_frames: int, seed: int):
-    from arm_sim.camera import sample_camera_pose
-    from arm_sim.objects import object_pool
-    from arm_sim.scenes import cluttered_scene
-    from arm_sim.world import SimWorld
-
     pool = object_pool(split="heldout", seed=seed)
     frames = []
     for k in tqdm(range(n_frames), desc="render", leave=False):
         rng = np.random.default_rng([seed, k])
-        scene = cluttered_scene(pool, rng, n_objects=int(rng.integers(3, 21)))
-        world = SimWorld(scene, robot_arm=False)
-        frames.append(world.render(sample_camera_pose(rng, scene.table_centre), rng=rng, with_visibility=False))
-        world.close()
+        frames.append(render_benchmark_view(pool, rng, (3, 20), with_visibility=False)[1])
     return frames
 
 
@@ -36,7 +31,7 @@ def _median_ms(fn, frames, repeats: int) -> tuple[float, float]:
             fn(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera)
             wall.append(time.perf_counter() - start)
             cpu.append(time.process_time() - start_cpu)
-    return 1e3 * float(np.median(wall)), 1e3 * float(np.median(cpu))
+    return 1e3 * median(wall), 1e3 * median(cpu)
 
 
 def measure(n_frames: int = 6, repeats: int = 3, seed: int = 123) -> dict:

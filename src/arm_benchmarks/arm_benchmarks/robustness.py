@@ -330,27 +330,14 @@ def render_frames(
     """`count` noisy renders of one seeded, settled cluttered scene (no robot), as RgbdFrames."""
     from arm_core.camera import look_at
     from arm_sim.objects import object_pool
-    from arm_sim.scenes import Scene, cluttered_scene
-    from arm_sim.world import SimWorld
+    from arm_sim.views import BenchmarkScene
 
     rng = np.random.default_rng(seed)
-    if n_objects:
-        scene = cluttered_scene(
-            object_pool(split="heldout", seed=seed),
-            rng,
-            n_objects=n_objects,
-            scale_range=(0.5, 1.2),
-            drop_std_m=0.08 + 0.004 * n_objects,
-            settle_s=settle_s,
-        )
-    else:
-        scene = Scene()
-    world = SimWorld(scene, robot_arm=False, width=width, height=height)
-    try:
+    pool = object_pool(split="heldout", seed=seed) if n_objects else None
+    options = dict(scale_range=(0.5, 1.2), drop_std_m=0.08 + 0.004 * n_objects, settle_s=settle_s)
+    with BenchmarkScene(pool, rng, n_objects, with_visibility=False, width=width, height=height, **options) as views:
         T_world_camera = look_at(CAMERA_EYE, CAMERA_TARGET)
-        return [world.render(T_world_camera, rng=rng, with_visibility=False) for _ in range(count)]
-    finally:
-        world.close()
+        return [views.render(T_world_camera) for _ in range(count)]
 
 
 def camera_messages(

@@ -5,17 +5,14 @@ import pytest
 import torch
 import trimesh
 
-from arm_benchmarks import bench_recon
-from arm_benchmarks.bench_recon import (
-    BenchConfig,
-    bootstrap_ci,
-    match_instances,
-    parse_args,
-    run,
-    scene_stability,
-    visibility_bin,
-    wilson,
-)
+from arm_benchmarks.bench_recon import parse_args, run
+from arm_benchmarks.recon.config import BenchConfig
+from arm_benchmarks.recon.matching import match_instances
+from arm_benchmarks.recon.physics import scene_stability
+from arm_benchmarks.recon.plots import plot_by_visibility, plot_qualitative, plot_stability
+from arm_benchmarks.recon.report import write_report
+from arm_benchmarks.recon.scoring import load_reconstructors
+from arm_benchmarks.recon.summary import summarise, visibility_bin
 from arm_planner.twin import TwinObject
 
 torch.set_num_threads(2)
@@ -60,7 +57,7 @@ def test_instances_are_matched_one_to_one_above_half_overlap():
     assert match_instances(truth, truth, [1, 2, 3]) == {1: 1, 2: 2, 3: 3}
 
 
-def test_bins_and_intervals():
+def test_visibility_bins():
     assert [visibility_bin(v) for v in (0.0, 0.19, 0.2, 0.59, 0.8, 1.0)] == [
         "0.0-0.2",
         "0.0-0.2",
@@ -69,10 +66,6 @@ def test_bins_and_intervals():
         "0.8-1.0",
         "0.8-1.0",
     ]
-    low, high = wilson(9, 10)
-    assert low < 0.9 < high <= 1.0 and wilson(0, 0) == [None, None]
-    low, high = bootstrap_ci(np.arange(100.0))
-    assert low < 49.5 < high and high - low < 20
 
 
 def test_arguments_are_validated():
@@ -87,8 +80,7 @@ def test_arguments_are_validated():
 @pytest.fixture(scope="module")
 def baseline_only_checkpoints(tmp_path_factory):
     """A baseline checkpoint from two steps of the project trainer; no ARM checkpoints."""
-    from test_dataset import tiny_train_config, write_box_dataset
-
+    from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
     from arm_reconstruction.train import train
 
     root = tmp_path_factory.mktemp("recon_data")
@@ -133,7 +125,9 @@ def test_end_to_end_run_reports_measured_methods_and_skips_missing_ones(tmp_path
     assert baseline["status"] == "ok" and baseline["n_chamfer"] + baseline["n_empty"] == n
     truth = methods["ground-truth"]
     assert truth["chamfer_m"] is None and truth["iou"] is None and truth["stable_fraction"] >= 0.5
-    assert truth["displacement_m_mean"] >= 0.0
+    cached = json.loads(next((tmp_path / "cache").rglob("scene_00000.json")).read_text())
+    moved = [r["methods"]["ground-truth"]["displacement_m"] for r in cached["rows"]]
+    assert truth["displacement_m_mean"] == pytest.approx(np.mean([m for m in moved if np.isfinite(m)]))
     report = (tmp_path / "report.md").read_text()
     assert "**arm: skipped**" in report and "CD = 0.5 * (mean" in report
     for name in ("summary.json", "chamfer_by_visibility.png", "stability.png"):
@@ -162,7 +156,7 @@ def test_predicted_segmentation_is_matched_to_the_true_objects(tmp_path, baselin
 
 
 def test_visible_only_needs_no_checkpoint(tmp_path):
-    reconstructors, skipped, checkpoints = bench_recon.load_reconstructors(("visible-only",), str(tmp_path))
+    reconstructors, skipped, checkpoints = load_reconstructors(("visible-only",), str(tmp_path))
     assert list(reconstructors) == ["visible-only"] and not skipped and not checkpoints
 
 
@@ -209,7 +203,7 @@ def synthetic_results():
 
 def test_summary_and_targets_follow_the_measurements():
     config = BenchConfig(methods=("baseline", "arm", "arm-c", "ground-truth"))
-    summary = bench_recon.summarise(synthetic_results(), config, {"arm-c": "no checkpoint"}, {})
+    summary = summarise(synthetic_results(), config, {"arm-c": "no checkpoint"}, {})
     methods = summary["methods"]
     assert methods["arm-c"] == {"status": "skipped", "reason": "no checkpoint"}
     assert methods["arm"]["chamfer_m"] == pytest.approx(0.006)
@@ -229,13 +223,18 @@ def test_summary_and_targets_follow_the_measurements():
     assert not targets["arm_lower_chamfer_every_bin_below_0.6"]["met"], "bins without objects are not met"
     assert not targets["arm_stable_fraction"]["met"]
     assert targets["arm_stable_gap_to_ground_truth"]["value"] == pytest.approx(0.5)
+    truth, arm = methods["ground-truth"], methods["arm"]
+    assert truth["displacement_m_mean"] == pytest.approx(0.001)
+    assert truth["displacement_m_median"] == pytest.approx(0.001)
+    assert arm["displacement_m_mean"] == pytest.approx(0.0155) and arm["stable_ci90"][0] < 0.5 < arm["stable_ci90"][1]
+    assert methods["baseline"]["stable_fraction"] == 0.0 and methods["baseline"]["stable_ci90"][0] == 0.0
 
 
 def test_plots_and_report_are_written(tmp_path):
     config = BenchConfig(methods=("baseline", "arm", "ground-truth"))
-    summary = bench_recon.summarise(synthetic_results(), config, {}, {})
-    bench_recon.plot_by_visibility(summary, tmp_path / "a.png")
-    bench_recon.plot_stability(summary, tmp_path / "b.png")
+    summary = summarise(synthetic_results(), config, {}, {})
+    plot_by_visibility(summary, tmp_path / "a.png")
+    plot_stability(summary, tmp_path / "b.png")
     box = trimesh.creation.box(extents=(0.05, 0.05, 0.1))
     case = {
         "rgb": np.zeros((40, 40, 3), np.uint8),
@@ -248,8 +247,8 @@ def test_plots_and_report_are_written(tmp_path):
     }
     for name in ("baseline", "arm", "ground-truth"):
         case[name] = (box.vertices, box.faces)
-    bench_recon.plot_qualitative([case], tmp_path / "c.png")
-    bench_recon.write_report(summary, tmp_path / "report.md", ["a.png"])
+    plot_qualitative([case], tmp_path / "c.png")
+    write_report(summary, tmp_path / "report.md", ["a.png"])
     assert all((tmp_path / f).stat().st_size > 1000 for f in ("a.png", "b.png", "c.png"))
     report = (tmp_path / "report.md").read_text()
     assert "| arm | 2 | 0 | 6.00" in report and "| 0.0-0.2 | 1 | 20.00 | 10.00 | 50.0% |" in report

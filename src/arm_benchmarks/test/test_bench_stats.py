@@ -1,16 +1,8 @@
 import json
 import math
 
-import pytest
-
-from arm_benchmarks.bench_manip import plan_episodes
-from arm_benchmarks.bench_stats import BINS, bin_label, summarise, wilson
-
-
-def test_wilson_interval():
-    p, lo, hi = wilson(8, 10)
-    assert p == 0.8 and lo == pytest.approx(0.5408, abs=1e-3) and hi == pytest.approx(0.9314, abs=1e-3)
-    assert wilson(0, 5)[1] == 0.0 and math.isnan(wilson(0, 0)[0])
+from arm_benchmarks.bench_manip import GROUND_TRUTH, load_done, plan_episodes, result_key
+from arm_benchmarks.bench_stats import BINS, bin_label, summarise
 
 
 def test_bins_match_the_paper():
@@ -42,10 +34,8 @@ def test_summary_layout_and_excluded_rows():
 
 
 def test_results_of_another_run_are_never_reused(tmp_path):
-    from arm_benchmarks.bench_manip import load_done, run_key
-
-    key, other = run_key({"steps": 200}), run_key({"steps": 300})
-    assert key != other and key == run_key({"steps": 200})
+    key, other = result_key({"steps": 200}), result_key({"steps": 300})
+    assert key != other and key == result_key({"steps": 200})
     log = tmp_path / "episodes.jsonl"
     rows = [
         {"episode": 0, "method": "arm", "success": True, "run_key": key},
@@ -59,7 +49,7 @@ def test_results_of_another_run_are_never_reused(tmp_path):
     assert len((tmp_path / "episodes.stale.jsonl").read_text().splitlines()) == 2
 
 
-def test_wilson_interval_contains_the_rate_at_the_ends():
-    for k, n in [(0, 1), (0, 7), (3, 3), (11, 11)]:
-        p, lo, hi = wilson(k, n)
-        assert lo <= p <= hi
+def test_older_ground_truth_rows_are_read_under_the_current_name(tmp_path):
+    log = tmp_path / "episodes.jsonl"
+    log.write_text(json.dumps({"episode": 0, "method": "ground_truth", "success": True, "run_key": "k"}) + "\n")
+    assert list(load_done(log, "k")) == [(0, GROUND_TRUTH)] and GROUND_TRUTH == "ground-truth"

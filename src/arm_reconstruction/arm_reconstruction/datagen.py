@@ -67,24 +67,19 @@ def generate_shard(
     objects_per_scene: tuple[int, int] = (3, 20),
 ) -> dict[str, np.ndarray]:
     """All samples of one shard as arrays (see module doc). Deterministic for a (split, seed)."""
-    from arm_sim.camera import sample_camera_pose
     from arm_sim.objects import object_pool
-    from arm_sim.scenes import cluttered_scene
-    from arm_sim.world import SimWorld
+    from arm_sim.views import BenchmarkScene
 
     rng = np.random.default_rng([SPLIT_SEED_OFFSET[split], int(seed)])
     pool = object_pool(split=SPLIT_OBJECT_POOL[split])
     columns: dict[str, list] = {key: [] for key in _SAMPLE_KEYS}
     for scene_index in range(scenes_per_shard):
-        n_objects = int(rng.integers(objects_per_scene[0], objects_per_scene[1] + 1))
-        scene = cluttered_scene(pool, rng, n_objects=n_objects)
-        meshes = [placed.world_mesh() for placed in scene.objects]
-        bounds = [mesh.bounds for mesh in meshes]
-        world = SimWorld(scene, robot_arm=False)
-        try:
+        with BenchmarkScene(pool, rng, tuple(objects_per_scene)) as views:
+            scene = views.scene
+            meshes = [placed.world_mesh() for placed in scene.objects]
+            bounds = [mesh.bounds for mesh in meshes]
             for view_index in range(views_per_scene):
-                T_world_camera = sample_camera_pose(rng, scene.table_centre)
-                frame = world.render(T_world_camera, rng=rng)
+                frame = views.render()
                 pixels = np.bincount(frame.labels[frame.depth_m > 0].ravel(), minlength=len(scene.objects) + 1)[1:]
                 visible_ids = [int(i) + 1 for i in np.flatnonzero(pixels >= min_visible_pixels)]
                 if not visible_ids:
@@ -111,8 +106,6 @@ def generate_shard(
                     columns["voxel_size_m"].append(grid_frame.voxel_size_m)
                     columns["table_height_m"].append(grid_frame.table_height_m)
                     columns["T_world_camera"].append(frame.T_world_camera)
-        finally:
-            world.close()
     return _to_arrays(columns, seed, split, resolution, k)
 
 

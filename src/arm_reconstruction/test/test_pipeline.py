@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 import torch
-from test_dataset import tiny_train_config, write_box_dataset
 
 from arm_core.camera import look_at
 from arm_core.frames import FrameInputError
+from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
 from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 import torch
-from test_dataset import tiny_train_config, write_box_dataset
 
+from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
 from arm_reconstruction.checkpoint import load_checkpoint, read_checkpoint
 from arm_reconstruction.model_cards import write_model_card
 from arm_reconstruction.train import PRIORS, TrainConfig, losses_for_batch, main, train, voxel_metrics
