@@ -6,6 +6,7 @@ import numpy as np
 
 from arm_core.camera import look_at
 from arm_sim import robot
+from arm_sim.appearance import DEFAULT_DOMAIN
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
@@ -29,10 +30,11 @@ class SimSession:
         height=480,
         fovy_deg=45.0,
         depth_noise=True,
+        visual_domain=DEFAULT_DOMAIN,
     ):
         self.rng = np.random.default_rng(seed)
         pool = object_pool(objects, split=split, seed=seed)
-        self.scene = cluttered_scene(pool, self.rng, n_objects=n_objects)
+        self.scene = cluttered_scene(pool, self.rng, n_objects=n_objects, domain=visual_domain)
         self.world = SimWorld(self.scene, robot_arm=True, width=width, height=height, fovy_deg=fovy_deg)
         self.world.settle(0.5)
         self.T_world_camera = look_at(camera_eye, camera_target)

@@ -71,3 +71,59 @@ def apply_depth_noise(depth_m: np.ndarray, K: np.ndarray, rng: np.random.Generat
     disparity = focal_baseline / np.maximum(noisy, 1e-3)
     noisy = focal_baseline / np.maximum(np.round(disparity / noise.subpixel) * noise.subpixel, 1e-6)
     return np.where(valid & ~drop, noisy, 0.0).astype(np.float32)
+
+
+@dataclass
+class SensorArtefacts:
+    """What a structured-light sensor does on real scenes beyond DepthNoise: returns missing on dark
+    and shiny surfaces (in blobs), mixed ("flying") pixels at depth edges, and depth registered to
+    colour about a pixel off."""
+
+    dark_dropout: float = 0.55  # share of a dark surface lost
+    shiny_dropout: float = 0.25  # share of a shiny surface lost, plus its highlights
+    highlight_level: float = 0.9  # colour intensity (0-1) above which a shiny surface returns nothing
+    blob_px: int = 6  # size of dropout blobs
+    flying_fraction: float = 0.5  # share of edge pixels that take a depth between the two sides
+    edge_jump_m: float = 0.03
+
+
+def _blobs(shape: tuple, blob_px: int, share: float, rng: np.random.Generator) -> np.ndarray:
+    """A random mask of about `share` of the pixels, in blobs of about blob_px."""
+    h, w = shape
+    coarse = rng.uniform(size=(h // blob_px + 2, w // blob_px + 2)).astype(np.float32)
+    smooth = cv2.resize(coarse, (w + 2 * blob_px, h + 2 * blob_px), interpolation=cv2.INTER_LINEAR)
+    return smooth[blob_px : blob_px + h, blob_px : blob_px + w] < share
+
+
+def apply_sensor_artefacts(
+    depth_m: np.ndarray,
+    rgb: np.ndarray,
+    dark: np.ndarray,
+    shiny: np.ndarray,
+    shift_px: tuple,
+    rng: np.random.Generator,
+    artefacts: SensorArtefacts,
+) -> np.ndarray:
+    """Depth (float32 m, 0 = no return) with the artefacts of real sensors. dark / shiny: boolean
+    masks of the pixels on such surfaces; shift_px: (columns, rows) misregistration."""
+    depth = depth_m.copy()
+    lost = dark & _blobs(depth.shape, artefacts.blob_px, artefacts.dark_dropout, rng)
+    highlight = rgb.min(axis=2) > 255 * artefacts.highlight_level
+    lost |= shiny & (highlight | _blobs(depth.shape, artefacts.blob_px, artefacts.shiny_dropout, rng))
+    depth[lost] = 0.0
+    # flying pixels: an edge pixel takes a depth between its own and its farther neighbour's
+    padded = np.pad(depth, 1, mode="edge")
+    neighbours = np.stack([padded[1:-1, 2:], padded[1:-1, :-2], padded[2:, 1:-1], padded[:-2, 1:-1]])
+    farther = np.where(neighbours > 0, neighbours, 0.0).max(axis=0)
+    edge = (depth > 0) & (farther - depth > artefacts.edge_jump_m)
+    edge &= rng.uniform(size=depth.shape) < artefacts.flying_fraction
+    t = rng.uniform(0.1, 0.9, size=depth.shape).astype(np.float32)
+    depth = np.where(edge, depth + t * (farther - depth), depth).astype(np.float32)
+    dx, dy = shift_px
+    if dx or dy:
+        depth = np.roll(depth, (dy, dx), axis=(0, 1))
+        if dy:
+            depth[(slice(0, dy) if dy > 0 else slice(dy, None)), :] = 0.0
+        if dx:
+            depth[:, (slice(0, dx) if dx > 0 else slice(dx, None))] = 0.0
+    return depth

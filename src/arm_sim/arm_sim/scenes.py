@@ -9,9 +9,10 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from arm_core.camera import look_at
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS, SceneAppearance, sample_appearance
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import ObjectModel, ObjectPool
-from arm_sim.world import OBJECT_DENSITY_KG_M3, SimWorld, object_body_name
+from arm_sim.world import FLOOR_DROP_M, OBJECT_DENSITY_KG_M3, SimWorld, object_body_name
 
 DROP_REGION_X = (-0.2, 0.3)  # drop centres stay clear of the robot base at x = -0.55
 DROP_REGION_Y = (-0.3, 0.3)
@@ -43,6 +44,7 @@ class Scene:
     table_height_m: float = 0.0
     table_half_extent_m: tuple = (0.7, 0.5)
     table_rgba: tuple = (0.55, 0.45, 0.35, 1.0)
+    appearance: SceneAppearance | None = None  # None: the plain domain
 
     @property
     def table_centre(self) -> np.ndarray:
@@ -55,7 +57,21 @@ class Scene:
             for o, T, k in zip(self.objects, poses, keep, strict=True)
             if k
         ]
-        return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba)
+        appearance = None if self.appearance is None else self.appearance.subset(keep)
+        return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance)
+
+    def with_domain(self, domain: str, rng: np.random.Generator) -> "Scene":
+        """This scene in a visual domain ("realistic": a look drawn from a child of rng, so the
+        caller's own random stream, and with it the scene's geometry, stays as in the plain domain)."""
+        if domain not in DOMAINS:
+            raise ValueError(f"unknown visual domain {domain!r}; expected one of {DOMAINS}")
+        appearance = None
+        if domain == "realistic":
+            floor_z = self.table_height_m - FLOOR_DROP_M
+            appearance = sample_appearance(
+                rng.spawn(1)[0], len(self.objects), self.table_height_m, self.table_half_extent_m, floor_z
+            )
+        return Scene(self.objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance)
 
 
 def random_rotation(rng: np.random.Generator, upright_probability: float) -> np.ndarray:
@@ -98,6 +114,7 @@ def cluttered_scene(
     drop_height_m: float = 0.2,
     table_height_m: float = 0.0,
     settle_s: float = 2.5,
+    domain: str = DEFAULT_DOMAIN,
 ) -> Scene:
     """Objects dropped around a random centre on the table and settled by physics.
 
@@ -121,7 +138,7 @@ def cluttered_scene(
         height = float(np.ptp((model.mesh.vertices * scale) @ rotation.T, axis=0)[2])
         spheres.append((xy[0], xy[1], z_bottom + 0.5 * height, max(radius, 0.5 * height)))
         scene.objects.append(PlacedObject(model, scale, T, _random_rgba(rng)))
-    return settle_scene(scene, settle_s)
+    return settle_scene(scene, settle_s).with_domain(domain, rng)
 
 
 def task_camera_pose(table_height_m: float = 0.0) -> np.ndarray:
@@ -178,6 +195,7 @@ def task_scene(
     extra_distractors=(1, 7),
     table_height_m: float = 0.0,
     max_tries: int = 40,
+    domain: str = DEFAULT_DOMAIN,
 ) -> tuple[Scene, int, np.ndarray]:
     """A manipulation scene: the target upright at a fixed spot, distractors added directly in front
     of it (towards the camera, y ~ N(target y, 0.1 m)) until its visible fraction falls in
@@ -228,4 +246,4 @@ def task_scene(
         if lo <= v < hi:
             scene, visible = trial, v
             occupied.append(disc)
-    return settle_scene(scene, 1.0), 0, camera
+    return settle_scene(scene, 1.0).with_domain(domain, rng), 0, camera

@@ -24,6 +24,7 @@ from arm_ros.conversions.images import camera_info_from_K, numpy_to_image
 from arm_ros.conversions.meshes import reconstructed_object_msg
 from arm_ros.conversions.poses import matrix_to_pose
 from arm_sim import robot
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.core import SimSession, trajectory_targets
 
 
@@ -39,6 +40,14 @@ class SimNode(Node):
         eye = declare(self, "camera_eye", [0.7, 0.0, 0.5], "Camera position in the world, metres")
         target = declare(self, "camera_target", [0.0, 0.0, 0.05], "Point the camera looks at, metres")
         self.depth_noise = declare(self, "depth_noise", True, "Apply the depth-sensor noise model")
+        visual_domain = declare(
+            self,
+            "visual_domain",
+            DEFAULT_DOMAIN,
+            "realistic: textured objects, furniture, varied light, camera response and sensor artefacts; "
+            "plain: one flat colour per object on a plain table",
+            choices=list(DOMAINS),
+        )
         width = declare(self, "width", 640, "Image width, pixels", 64, 1920)
         height = declare(self, "height", 480, "Image height, pixels", 48, 1080)
         fovy = declare(self, "fovy_deg", 45.0, "Vertical field of view, degrees", 10.0, 120.0)
@@ -61,6 +70,7 @@ class SimNode(Node):
             height=height,
             fovy_deg=fovy,
             depth_noise=self.depth_noise,
+            visual_domain=visual_domain,
         )
         self.errors = RateLimitedErrors(self.get_logger())
         qos = sensor_qos(reliability)

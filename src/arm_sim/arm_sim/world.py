@@ -6,8 +6,9 @@ import numpy as np
 from arm_core.camera import intrinsics, silhouette
 from arm_core.frames import RgbdFrame
 from arm_sim import robot
+from arm_sim.appearance import SceneAppearance, apply_camera_response, sample_camera_response
 from arm_sim.camera import OPTICAL_TO_MUJOCO
-from arm_sim.depth_noise import DepthNoise, apply_depth_noise
+from arm_sim.depth_noise import DepthNoise, SensorArtefacts, apply_depth_noise, apply_sensor_artefacts
 
 RENDER_CAMERA = "render_camera"
 ROBOT_BASE_XY = (-0.55, 0.0)
@@ -54,19 +55,76 @@ def build_world(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: 
         friction=list(OBJECT_FRICTION),
     )
     world.add_camera(name=RENDER_CAMERA, pos=[1.0, 0.0, table_z + 1.0], fovy=45.0)
+    appearance = scene.appearance
+    if appearance is not None:
+        _add_surroundings(spec, appearance, scene.table_half_extent_m)
     for i, placed in enumerate(scene.objects):
-        _add_object(spec, i, placed)
+        _add_object(spec, i, placed, None if appearance is None else appearance.objects[i])
     if robot_arm:
         robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
     return spec.compile()
 
 
-def _add_object(spec: mujoco.MjSpec, i: int, placed) -> None:
+def _add_texture(spec: mujoco.MjSpec, name: str, image: np.ndarray, cube: bool) -> None:
+    kind = mujoco.mjtTexture.mjTEXTURE_CUBE if cube else mujoco.mjtTexture.mjTEXTURE_2D
+    texture = spec.add_texture(name=name, type=kind, width=image.shape[1], height=image.shape[0], nchannel=3)
+    texture.data = np.ascontiguousarray(image, dtype=np.uint8).tobytes()
+
+
+def _add_material(spec: mujoco.MjSpec, name: str, texture: str, repeat=(1.0, 1.0), uniform=False, shiny=False):
+    material = spec.add_material(name=name, texrepeat=list(repeat), texuniform=uniform)
+    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = texture
+    material.specular, material.shininess = (0.9, 0.9) if shiny else (0.15, 0.2)
+    return material
+
+
+def _add_surroundings(spec: mujoco.MjSpec, appearance: SceneAppearance, table_half_extent_m) -> None:
+    """Textures of table and floor, table legs, furniture and lights of the realistic domain; none of
+    it collides with anything."""
+    spec.visual.headlight.ambient = list(appearance.ambient)
+    spec.visual.headlight.diffuse = [0.25, 0.25, 0.25]
+    spec.visual.quality.shadowsize = 1024
+    for name, image in appearance.surfaces.items():
+        _add_texture(spec, f"{name}_texture", image, cube=False)
+    _add_material(spec, "table_material", "table_texture", appearance.table_texture_repeat, uniform=False)
+    _add_material(spec, "floor_material", "floor_texture", (4.0, 4.0), uniform=True)
+    _add_material(spec, "furniture_material", "furniture_texture", (1.0, 1.0), uniform=True)
+    _add_material(spec, "wall_material", "wall_texture", (1.0, 1.0), uniform=True)
+    for name in ("table", "floor"):
+        spec.geom(name).material = f"{name}_material"
+        spec.geom(name).rgba = [1.0, 1.0, 1.0, 1.0]
+    for box in appearance.boxes:
+        spec.worldbody.add_geom(
+            name=box.name,
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(box.half_size_m),
+            pos=list(box.centre_m),
+            rgba=[*box.rgb, 1.0],
+            material=f"{box.texture}_material" if box.texture else "",
+            contype=0,
+            conaffinity=0,
+        )
+    for light in appearance.lights:
+        spec.worldbody.add_light(
+            pos=list(light.pos_m),
+            dir=list(light.direction),
+            diffuse=list(light.diffuse),
+            specular=list(light.specular),
+            castshadow=light.cast_shadow and appearance.shadows,
+        )
+
+
+def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None) -> None:
     T = np.asarray(placed.T_world_object, dtype=np.float64)
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, T[:3, :3].reshape(9))
     body = spec.worldbody.add_body(name=object_body_name(i), pos=T[:3, 3].tolist(), quat=quat.tolist())
     body.add_freejoint(name=f"{object_body_name(i)}_joint")
+    material = ""
+    if look is not None:
+        material = f"{object_body_name(i)}_material"
+        _add_texture(spec, f"{object_body_name(i)}_texture", look.texture, cube=True)
+        _add_material(spec, material, f"{object_body_name(i)}_texture", shiny=look.shiny)
     for j, (vertices, faces) in enumerate(placed.convex_parts_local()):
         mesh_name = f"{object_body_name(i)}_mesh_{j}"
         spec.add_mesh(
@@ -79,7 +137,8 @@ def _add_object(spec: mujoco.MjSpec, i: int, placed) -> None:
             type=mujoco.mjtGeom.mjGEOM_MESH,
             meshname=mesh_name,
             density=placed.density_kg_m3,
-            rgba=list(placed.rgba),
+            rgba=list(placed.rgba) if look is None else [1.0, 1.0, 1.0, 1.0],
+            material=material,
             friction=list(OBJECT_FRICTION),
             condim=4,
         )
@@ -114,6 +173,16 @@ class SimWorld:
         body_to_label = np.zeros(self.model.nbody, dtype=np.uint16)
         body_to_label[self.object_ids] = np.arange(1, len(self.object_ids) + 1, dtype=np.uint16)
         self._geom_label[:n_geom] = body_to_label[self.model.geom_bodyid]
+        self.appearance = scene.appearance
+        self._geom_dark = np.zeros(n_geom + 1, bool)
+        self._geom_shiny = np.zeros(n_geom + 1, bool)
+        if self.appearance is not None:
+            looks = self.appearance.objects
+            object_of_geom = self._geom_label[:n_geom].astype(np.int64) - 1
+            on_object = object_of_geom >= 0
+            self._geom_dark[:n_geom][on_object] = [looks[k].dark for k in object_of_geom[on_object]]
+            self._geom_shiny[:n_geom][on_object] = [looks[k].shiny for k in object_of_geom[on_object]]
+        self.artefacts = SensorArtefacts()
         self._renderer = None
         if robot_arm:
             self._joint_qpos = np.array([self.model.joint(n).qposadr[0] for n in robot.JOINT_NAMES])
@@ -183,6 +252,7 @@ class SimWorld:
             flags = mujoco.mjtRndFlag
             for flag in (flags.mjRND_SHADOW, flags.mjRND_REFLECTION, flags.mjRND_SKYBOX):
                 self._renderer.scene.flags[flag] = False
+            self._renderer.scene.flags[flags.mjRND_SHADOW] = self.appearance is not None and self.appearance.shadows
         r = self._renderer
         self._place_camera(np.asarray(T_world_camera, dtype=np.float64))
         r.update_scene(self.data, camera=self._camera_id)
@@ -196,7 +266,14 @@ class SimWorld:
         geom = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
         labels = self._geom_label[geom]
         noise = DepthNoise() if noise is None else noise
-        depth = apply_depth_noise(depth, self.K, rng if rng is not None else np.random.default_rng(), noise)
+        rng = rng if rng is not None else np.random.default_rng()
+        depth = apply_depth_noise(depth, self.K, rng, noise)
+        if self.appearance is not None and noise.enabled:
+            depth = apply_sensor_artefacts(
+                depth, rgb, self._geom_dark[geom], self._geom_shiny[geom], self.appearance.depth_shift_px, rng,
+                self.artefacts,
+            )
+            rgb = apply_camera_response(rgb, sample_camera_response(rng), rng)
         visible = (
             self.visible_fractions(labels, T_world_camera) if with_visibility else np.full(len(self.object_ids), -1.0)
         )
