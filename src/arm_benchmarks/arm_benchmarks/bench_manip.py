@@ -42,6 +42,7 @@ from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import reconstruct
 from arm_sim import robot
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import task_scene
@@ -71,7 +72,9 @@ def plan_episodes(n: int, tasks, bin_indices, seed: int) -> list[Episode]:
     return [Episode(i, *combos[i % len(combos)], seed * 100_003 + i) for i in range(n)]
 
 
-def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 3):
+def build_scene(
+    episode: Episode, bins, target_pool, distractor_pool, target_scale: float, tries: int = 3, domain=DEFAULT_DOMAIN
+):
     """(scene, target index, frame) for the episode, or raises RuntimeError when the bin is unreachable."""
     lo, hi = bins[episode.bin_index]
     last = None
@@ -80,7 +83,7 @@ def build_scene(episode: Episode, bins, target_pool, distractor_pool, target_sca
         target = target_pool.sample(rng)
         try:
             scene, target_index, camera = task_scene(
-                target, distractor_pool, rng, visible_range=(lo, hi), target_scale=target_scale
+                target, distractor_pool, rng, visible_range=(lo, hi), target_scale=target_scale, domain=domain
             )
         except RuntimeError as error:
             last = error
@@ -232,6 +235,7 @@ def main(argv=None) -> int:
         help="closed loop: the twin observes the world's state every this many seconds (0: open loop, the paper's)",
     )
     parser.add_argument("--nthread", type=int, default=2)
+    parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
     try:
@@ -273,6 +277,7 @@ def main(argv=None) -> int:
         "observe_period_s": args.observe_period,
         "objects": args.objects or "procedural heldout categories",
         "nthread": args.nthread,
+        "domain": args.domain,
     }
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
@@ -289,7 +294,7 @@ def main(argv=None) -> int:
             base = {"episode": episode.index, "task": episode.task, "bin": bin_label(BINS[episode.bin_index])}
             try:
                 scene, target_index, frame, target_name = build_scene(
-                    episode, BINS, target_pool, distractor_pool, args.target_scale
+                    episode, BINS, target_pool, distractor_pool, args.target_scale, domain=args.domain
                 )
                 base |= {
                     "target": target_name,

@@ -46,6 +46,7 @@ from arm_benchmarks.recon.plots import plot_by_visibility, plot_qualitative, plo
 from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
 from arm_benchmarks.recon.summary import summarise
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 
 
@@ -123,6 +124,7 @@ def parse_args(argv=None) -> BenchConfig:
     parser.add_argument("--physics-timestep-s", type=float, default=defaults.physics_timestep_s)
     parser.add_argument("--stable-threshold-m", type=float, default=defaults.stable_threshold_m)
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
+    parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument(
         "--view",
         choices=("occluded", "random"),
@@ -160,6 +162,7 @@ def parse_args(argv=None) -> BenchConfig:
         physics_timestep_s=args.physics_timestep_s,
         stable_threshold_m=args.stable_threshold_m,
         depth_noise=not args.no_noise,
+        domain=args.domain,
         view=args.view,
         view_candidates=args.view_candidates,
         qualitative=args.qualitative,

@@ -31,6 +31,7 @@ from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import segment
 from arm_segmentation.visualization import colourise
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 from arm_sim.views import render_benchmark_view
 
@@ -45,6 +46,8 @@ METRIC_KEYS = (
     "boundary_recall",
     "boundary_f",
     "f_at_75",
+    "instances_per_object",
+    "background_fp_fraction",
 )
 
 
@@ -64,6 +67,9 @@ def parse_args(argv=None):
         "--dense", type=int, default=12, help="scenes with at least this many objects form the dense subset"
     )
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
+    parser.add_argument(
+        "--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the rendered scenes"
+    )
     parser.add_argument("--examples", type=int, default=4, help="example frames in examples.png")
     args = parser.parse_args(argv)
     if args.scenes < 1 or not 1 <= args.min_objects <= args.max_objects:
@@ -83,6 +89,7 @@ def frame_settings(args) -> dict:
         "min_objects": args.min_objects,
         "max_objects": args.max_objects,
         "depth_noise": not args.no_noise,
+        "domain": args.domain,
     }
 
 
@@ -100,7 +107,12 @@ def render_scene(index: int, args, pool):
     """Build, settle and render scene `index` (deterministic in seed and index)."""
     rng = np.random.default_rng([args.seed, index])
     scene, frame = render_benchmark_view(
-        pool, rng, (args.min_objects, args.max_objects), depth_noise=not args.no_noise, with_visibility=False
+        pool,
+        rng,
+        (args.min_objects, args.max_objects),
+        depth_noise=not args.no_noise,
+        with_visibility=False,
+        domain=args.domain,
     )
     return {
         "rgb": frame.rgb,
@@ -131,6 +143,9 @@ def score_scene(frame) -> dict:
         latency_ms = 1e3 * (time.perf_counter() - start)
         cpu_ms = 1e3 * (time.process_time() - start_cpu)
         metrics = segmentation_metrics(labels, gt)
+        predicted = labels > 0
+        metrics["instances_per_object"] = metrics["n_pred"] / result["n_visible"] if result["n_visible"] else np.nan
+        metrics["background_fp_fraction"] = float(np.mean(gt[predicted] == 0)) if predicted.any() else 0.0
         result[name] = {
             **{k: float(metrics[k]) for k in METRIC_KEYS},
             "n_pred": metrics["n_pred"],
@@ -145,7 +160,7 @@ def aggregate(rows: list[dict]) -> dict:
         return {}
     out = {}
     for name in METHODS:
-        out[name] = {k: mean([r[name][k] for r in rows]) for k in METRIC_KEYS}
+        out[name] = {k: mean([r[name][k] for r in rows if np.isfinite(r[name][k])]) for k in METRIC_KEYS}
         latencies = [r[name]["latency_ms"] for r in rows]
         out[name]["latency_ms_median"] = median(latencies)
         out[name]["latency_ms_p90"] = percentile(latencies, 90)
@@ -193,7 +208,7 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
     lines = ["# Unseen-object instance segmentation benchmark", ""]
     lines.append(
         f"{summary['scenes']} simulated cluttered scenes ({args.min_objects}-{args.max_objects} objects, "
-        f"pool: {summary['object_pool']}, seed {args.seed}, depth noise "
+        f"pool: {summary['object_pool']}, {args.domain} visual domain, seed {args.seed}, depth noise "
         f"{'off' if args.no_noise else 'on'}), 640x480 frames. Metrics as in the UOIS papers "
         "(Hungarian matching on overlap F; boundary tolerance ceil(0.003 x diagonal) px), averaged "
         "over frames. Latency: wall time per frame on this machine "
@@ -206,9 +221,9 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
         lines.append("")
         lines.append(
             "| method | overlap P | overlap R | overlap F | boundary P | boundary R | boundary F | F@75% "
-            "| latency median ms | p90 ms | CPU median ms |"
+            "| instances per object | background FP | latency median ms | p90 ms | CPU median ms |"
         )
-        lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for name in METHODS:
             if name not in stats:
                 continue
@@ -216,7 +231,8 @@ def write_report(path: pathlib.Path, summary: dict, args) -> None:
             lines.append(
                 f"| {name} | {s['overlap_precision']:.3f} | {s['overlap_recall']:.3f} | "
                 f"{s['overlap_f']:.3f} | {s['boundary_precision']:.3f} | {s['boundary_recall']:.3f} | "
-                f"{s['boundary_f']:.3f} | {s['f_at_75']:.3f} | {s['latency_ms_median']:.0f} | "
+                f"{s['boundary_f']:.3f} | {s['f_at_75']:.3f} | {s['instances_per_object']:.2f} | "
+                f"{s['background_fp_fraction']:.3f} | {s['latency_ms_median']:.0f} | "
                 f"{s['latency_ms_p90']:.0f} | {s['cpu_ms_median']:.0f} |"
             )
         lines.append("")
@@ -274,6 +290,7 @@ def main(argv=None) -> int:
         "object_pool": args.objects or "procedural held-out categories",
         "seed": args.seed,
         "depth_noise": not args.no_noise,
+        "domain": args.domain,
         "machine": f"{platform.machine()} {platform.processor() or 'cpu'}, python {platform.python_version()}",
         "cpu_count": os.cpu_count(),
         "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"),
@@ -306,7 +323,8 @@ def main(argv=None) -> int:
                 s = stats[name]
                 print(
                     f"  {name:24s} overlap F {s['overlap_f']:.3f}  boundary F {s['boundary_f']:.3f}  "
-                    f"F@75 {s['f_at_75']:.3f}  latency {s['latency_ms_median']:.0f} ms"
+                    f"F@75 {s['f_at_75']:.3f}  instances/object {s['instances_per_object']:.2f}  "
+                    f"background FP {s['background_fp_fraction']:.3f}  latency {s['latency_ms_median']:.0f} ms"
                 )
     print(f"[bench_seg] wrote {out / 'summary.json'}, {out / 'report.md'}, examples.png, metrics.png")
     return 0

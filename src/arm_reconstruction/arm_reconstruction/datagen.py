@@ -27,6 +27,9 @@ from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write, atomic_write_json
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
+from arm_sim.objects import object_pool
+from arm_sim.views import BenchmarkScene
 
 FORMAT = "arm-voxel-shard-v1"
 SPLIT_SEED_OFFSET = {"train": 0, "test": 1_000_000}
@@ -65,16 +68,14 @@ def generate_shard(
     views_per_scene: int = 8,
     min_visible_pixels: int = MIN_VISIBLE_PIXELS,
     objects_per_scene: tuple[int, int] = (3, 20),
+    domain: str = DEFAULT_DOMAIN,
 ) -> dict[str, np.ndarray]:
     """All samples of one shard as arrays (see module doc). Deterministic for a (split, seed)."""
-    from arm_sim.objects import object_pool
-    from arm_sim.views import BenchmarkScene
-
     rng = np.random.default_rng([SPLIT_SEED_OFFSET[split], int(seed)])
     pool = object_pool(split=SPLIT_OBJECT_POOL[split])
     columns: dict[str, list] = {key: [] for key in _SAMPLE_KEYS}
     for scene_index in range(scenes_per_shard):
-        with BenchmarkScene(pool, rng, tuple(objects_per_scene)) as views:
+        with BenchmarkScene(pool, rng, tuple(objects_per_scene), domain=domain) as views:
             scene = views.scene
             meshes = [placed.world_mesh() for placed in scene.objects]
             bounds = [mesh.bounds for mesh in meshes]
@@ -272,6 +273,7 @@ def main(argv=None) -> int:
     parser.add_argument("--resolution", type=int, default=32, help="grid side in voxels")
     parser.add_argument("--k", type=float, default=4.0, help="grid side / observed object diameter")
     parser.add_argument("--min-visible-pixels", type=int, default=MIN_VISIBLE_PIXELS)
+    parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     args = parser.parse_args(argv)
     if args.shards < 0 or args.workers < 1 or args.views_per_scene < 1 or args.scenes_per_shard < 1:
         parser.error("--shards must be >= 0, --workers, --views-per-scene and --scenes-per-shard >= 1")
@@ -286,6 +288,7 @@ def main(argv=None) -> int:
         scenes_per_shard=args.scenes_per_shard,
         views_per_scene=args.views_per_scene,
         min_visible_pixels=args.min_visible_pixels,
+        domain=args.domain,
     )
     print(json.dumps(summary, indent=1))
     return 0

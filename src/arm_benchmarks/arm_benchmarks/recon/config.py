@@ -8,6 +8,7 @@ import pathlib
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_core.run_key import run_key
 from arm_reconstruction.metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION
+from arm_sim.appearance import DEFAULT_DOMAIN
 
 VISIBLE_ONLY = "visible-only"
 NETWORK_METHODS = ("baseline", "baseline+ray-carving", "baseline+E", "arm-c-s", "arm-c", "arm")
@@ -45,6 +46,7 @@ class BenchConfig:
     physics_timestep_s: float = 0.01
     stable_threshold_m: float = 0.01
     depth_noise: bool = True
+    domain: str = DEFAULT_DOMAIN
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4
