@@ -50,7 +50,7 @@ def object_panorama(rng: np.random.Generator, size_px: int, pattern: str, dark: 
             image[cut:] = random_colour(rng, dark)
     elif pattern == "label":
         top, bottom = sorted(rng.integers(h // 6, 5 * h // 6, size=2))
-        bottom = max(bottom, top + h // 4)
+        bottom = min(h, max(bottom, top + h // 4))
         label = random_colour(rng) if not dark else random_colour(rng, dark=False) * 0.8
         image[top:bottom] = label
         ink = random_colour(rng, dark=True) if label.mean() > 0.4 else np.ones(3) * 0.95

@@ -103,3 +103,10 @@ def test_object_designs_have_several_colours():
         assert cube_texture(panorama, np.ones(3)).shape == (6 * 32, 32, 3)
     dark = object_panorama(rng, 32, "plain", dark=True)
     assert dark.mean() < 0.1
+
+
+def test_every_design_fits_its_panorama():
+    rng = np.random.default_rng(0)
+    for _ in range(300):  # labels near the bottom once overran the image
+        for pattern in ("label", "print", "bands"):
+            assert object_panorama(rng, 48, pattern, dark=bool(rng.uniform() < 0.5)).shape == (48, 192, 3)
