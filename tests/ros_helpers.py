@@ -1,40 +1,27 @@
-"""Helpers for integration tests: real node processes over DDS on an isolated domain."""
+"""Helpers for integration tests: real node processes (arm_ros.processes) over DDS on an isolated domain."""
 
-import os
 import pathlib
-import signal
-import subprocess
 import time
 
+import pytest
 import rclpy
-from ament_index_python.packages import get_package_prefix
 
-from arm_ros.processes import config_file
-
-
-def executable(package: str, name: str) -> str:
-    return str(pathlib.Path(get_package_prefix(package)) / "lib" / package / name)
+from arm_benchmarks.robustness.nodes import reconstruction_checkpoint, reconstruction_params
+from arm_ros.processes import NodeProcess, executable, node_built
 
 
-def start_node(package: str, name: str, *ros_args: str, params_file: str | None = None, log=None):
-    cmd = [executable(package, name), "--ros-args"]
-    if params_file:
-        cmd += ["--params-file", str(config_file(params_file))]
-    cmd += list(ros_args)
-    return subprocess.Popen(
-        cmd, stdout=log or subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True
-    )
+def require_built(*keys: str) -> None:
+    """Fail (not skip) when a node the test needs is not installed: `make test` builds them all."""
+    missing = [f"{key} ({executable(key)})" for key in keys if not node_built(key)]
+    if missing:
+        pytest.fail(f"node executable(s) not built: {', '.join(missing)}; run `make setup` (colcon build)")
 
 
-def stop_node(process, timeout_s: float = 10.0) -> int:
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-    return process.returncode
+def start_node(key: str, log_dir, **kwargs) -> NodeProcess:
+    """Start the node of key (arm_ros.processes.NODES) with its installed parameter file, log in
+    log_dir/<key>.log; kwargs go to NodeProcess (params, remaps, args, ...)."""
+    require_built(key)
+    return NodeProcess(key, pathlib.Path(log_dir) / f"{key}.log", **kwargs)
 
 
 def spin_until(node, predicate, timeout_s: float) -> bool:
@@ -44,3 +31,11 @@ def spin_until(node, predicate, timeout_s: float) -> bool:
         if predicate():
             return True
     return predicate()
+
+
+def require_reconstruction_params() -> dict:
+    """Parameters of the reconstruction node in robustness runs (its checkpoint); fails without one."""
+    params = reconstruction_params()
+    if params is None:
+        pytest.fail(f"no reconstruction checkpoint ({reconstruction_checkpoint()}); it ships in the repository")
+    return params

@@ -10,10 +10,15 @@ import numpy as np
 import pytest
 
 from arm_bags.bags import BagReader, header_stamp_ns
-from arm_benchmarks.robustness import NodeProcess, Probe, node_built, reconstruction_params, stamp_of, tracebacks
+from arm_benchmarks.robustness.logs import tracebacks
+from arm_benchmarks.robustness.messages import stamp_of
+from arm_benchmarks.robustness.probe import Probe
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_ros.common import latched_qos
 from arm_ros.conversions.meshes import reconstructed_object_from_msg
+from arm_ros.processes import NodeProcess
+
+from ros_helpers import require_built, require_reconstruction_params
 
 CAMERA = ["camera/color/image_raw", "camera/depth/image_raw", "camera/camera_info", "camera/pose"]
 SIM = {"n_objects": 4, "camera_rate_hz": 0.25, "width": 320, "height": 240}  # live reconstruction keeps up
@@ -21,13 +26,8 @@ SIM = {"n_objects": 4, "camera_rate_hz": 0.25, "width": 320, "height": 240}  # l
 
 @pytest.fixture(scope="module")
 def recon_params():
-    for key in ("sim", "segmentation", "reconstruction", "record", "replay"):
-        if not node_built(key):
-            pytest.skip(f"{key} is not built (colcon build)")
-    params = reconstruction_params()
-    if params is None:
-        pytest.skip("no reconstruction checkpoint yet (src/arm_reconstruction/arm_reconstruction/checkpoints/arm.pt)")
-    return params
+    require_built("sim", "segmentation", "reconstruction", "record", "replay")
+    return require_reconstruction_params()
 
 
 @pytest.fixture

@@ -12,13 +12,11 @@ from arm_ros.conversions.images import K_from_camera_info, depth_to_metres, imag
 from arm_ros.conversions.poses import pose_to_matrix
 from arm_sim import robot
 
-from ros_helpers import spin_until, start_node, stop_node
+from ros_helpers import spin_until, start_node
 
 
-def test_sim_node_publishes_frames_truth_and_executes_trajectories(ros_node):
-    sim = start_node(
-        "arm_sim", "sim_node", "-p", "n_objects:=4", "-p", "camera_rate_hz:=4.0", params_file="sim_node.yaml"
-    )
+def test_sim_node_publishes_frames_truth_and_executes_trajectories(ros_node, tmp_path):
+    sim = start_node("sim", tmp_path, params={"n_objects": 4, "camera_rate_hz": 4.0})
     got = {}
     qos = sensor_qos("best_effort")
     for topic, kind in [
@@ -58,4 +56,4 @@ def test_sim_node_publishes_frames_truth_and_executes_trajectories(ros_node):
 
         assert spin_until(ros_node, reached, 30.0), f"joints at {got['joints'].position[:7]}, goal {goal}"
     finally:
-        assert stop_node(sim) == 0
+        assert sim.stop() == 0, sim.log()[-2000:]

@@ -21,8 +21,10 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={"console_scripts": [
+    entry_points={
+        "console_scripts": [
             "bringup = arm_bringup.bringup:main",
             "demo = arm_bringup.demo:main",
-    ]},
+        ]
+    },
 )

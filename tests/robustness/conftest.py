@@ -1,6 +1,7 @@
 """Shared fixtures of the robustness suite: rendered input frames and a log directory.
 
-Node processes are started with robustness_nodes.start (see there for the reconstruction checkpoint).
+Node processes are started with ros_helpers.start_node (robustness_nodes.run_against); the
+reconstruction checkpoint comes from ros_helpers.require_reconstruction_params.
 """
 
 import pathlib
@@ -9,7 +10,7 @@ import tempfile
 
 import pytest
 
-from arm_benchmarks.robustness import render_frames
+from arm_benchmarks.robustness.frames import render_frames
 
 
 @pytest.fixture(scope="session")

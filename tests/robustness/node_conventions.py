@@ -1,5 +1,5 @@
 """Convention checks every node's robustness module runs on its own module-scoped `run` fixture
-(`run["conventions"]` from arm_sim.robustness.convention_report, `run["exit_code"]`, `run["log"]`).
+(`run["conventions"]` from arm_benchmarks.robustness.parameters.convention_report, `run["exit_code"]`, `run["log"]`).
 A test module imports these functions so that pytest collects them there."""
 
 

@@ -1,33 +1,21 @@
 """Starting node processes for the robustness suite.
 
 The reconstruction node runs with the shipped checkpoint (ARM_ROBUSTNESS_CHECKPOINT overrides it,
-ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..." adds parameters); tests that need it skip without one.
+ARM_ROBUSTNESS_RECON_PARAMS="name:=value ..." adds parameters); tests that need it fail without one
+(the shipped checkpoint is part of the repository).
 """
 
-import pytest
+from arm_benchmarks.robustness.parameters import convention_report
+from arm_benchmarks.robustness.probe import Probe
 
-from arm_benchmarks import robustness
-from arm_benchmarks.robustness import NodeProcess, Probe, convention_report, node_built
-
-
-def reconstruction_params() -> dict:
-    params = robustness.reconstruction_params()
-    if params is None:
-        pytest.skip("no reconstruction checkpoint yet (src/arm_reconstruction/arm_reconstruction/checkpoints/arm.pt)")
-    return params
-
-
-def start(key: str, log_dir, **kwargs) -> NodeProcess:
-    if not node_built(key):
-        pytest.skip(f"{key} node is not built (colcon build)")
-    return NodeProcess(key, log_dir / f"{key}.log", **kwargs)
+from ros_helpers import start_node
 
 
 def run_against(key: str, log_dir, cases, endpoints: dict | None = None, **start_kwargs) -> dict:
     """Start the node, run cases(probe, process) -> report from a DDS probe, then read each of
     `endpoints` (name -> fn(probe)) and the node's conventions, and stop it with SIGINT.
     -> {"report", "conventions", "exit_code", "log", **endpoints}."""
-    process = start(key, log_dir, **start_kwargs)
+    process = start_node(key, log_dir, **start_kwargs)
     probe = Probe()
     try:
         report = cases(probe, process)

@@ -9,7 +9,7 @@ from node_conventions import (  # noqa: F401  collected here
 from rclpy.qos import DurabilityPolicy
 from robustness_nodes import run_against
 
-from arm_benchmarks.robustness_cases import run_planner_bad_inputs
+from arm_benchmarks.robustness.cases.planner import run_planner_bad_inputs
 
 FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
 

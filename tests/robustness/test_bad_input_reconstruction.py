@@ -7,9 +7,11 @@ from node_conventions import (  # noqa: F401  collected here
     test_parameters_are_declared_with_descriptors_and_ranges,
 )
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
-from robustness_nodes import reconstruction_params, run_against
+from robustness_nodes import run_against
 
-from arm_benchmarks.robustness_cases import run_reconstruction_bad_inputs
+from arm_benchmarks.robustness.cases.reconstruction import run_reconstruction_bad_inputs
+
+from ros_helpers import require_reconstruction_params
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +21,7 @@ def run(frames, robustness_logs):
     def cases(probe, process):
         return run_reconstruction_bad_inputs(probe, process, frames)
 
-    return run_against("reconstruction", robustness_logs, cases, publishers, params=reconstruction_params())
+    return run_against("reconstruction", robustness_logs, cases, publishers, params=require_reconstruction_params())
 
 
 def test_stays_alive_and_publishes_nothing_wrong(run):

@@ -9,8 +9,8 @@ from node_conventions import (  # noqa: F401  collected here
 from rclpy.qos import ReliabilityPolicy
 from robustness_nodes import run_against
 
-from arm_benchmarks.robustness import CAMERA_TOPICS
-from arm_benchmarks.robustness_cases import run_segmentation_bad_inputs
+from arm_benchmarks.robustness.cases.segmentation import run_segmentation_bad_inputs
+from arm_benchmarks.robustness.messages import CAMERA_TOPICS
 
 PREFIX = "/robustness/"
 

@@ -8,7 +8,7 @@ from node_conventions import (  # noqa: F401  collected here
 )
 from robustness_nodes import run_against
 
-from arm_benchmarks.robustness_cases import run_sim_bad_inputs
+from arm_benchmarks.robustness.cases.sim import run_sim_bad_inputs
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@ clear error by the core, by replay (exit code 2, no traceback) and by record."""
 
 import numpy as np
 import pytest
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
 
 from arm_bags.bags import (
@@ -20,11 +21,15 @@ from arm_bags.bags import (
     shift_stamps,
     write_bag,
 )
-from arm_benchmarks import robustness
-from arm_benchmarks.robustness import NodeProcess, Probe, header_at, node_built, tracebacks
+from arm_benchmarks.robustness.bags import broken_bags as broken_bag_files
+from arm_benchmarks.robustness.logs import tracebacks
+from arm_benchmarks.robustness.messages import header_at
+from arm_benchmarks.robustness.probe import Probe
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_ros.conversions.images import numpy_to_image
 from arm_ros.conversions.meshes import reconstructed_object_msg
+
+from ros_helpers import start_node
 
 
 def image(stamp_s, value=7, shape=(48, 64, 3)):
@@ -79,7 +84,7 @@ def test_unknown_type_and_existing_output_are_refused(tmp_path):
 
 
 def broken_bags(tmp_path) -> dict:
-    return robustness.broken_bags(tmp_path, project_messages())
+    return broken_bag_files(tmp_path, project_messages())
 
 
 def test_broken_bags_raise_a_clear_bag_error(tmp_path):
@@ -125,16 +130,13 @@ def test_frame_groups_release_complete_frames_and_drop_stale_partial_ones():
 
 
 def replay(tmp_path, *args, **params):
-    process = NodeProcess(
-        "replay", tmp_path / "replay.log", args=args, params={"wait_subscribers_s": 0.0, "linger_s": 0.2, **params}
-    )
+    process = start_node("replay", tmp_path, args=args, params={"wait_subscribers_s": 0.0, "linger_s": 0.2, **params})
     code = process.wait(60.0)
     if code is None:
         process.stop()
     return code, process.log()
 
 
-@pytest.mark.skipif(not node_built("replay"), reason="arm_sim is not built (colcon build)")
 def test_replay_refuses_broken_bags_with_exit_code_2(tmp_path):
     for name, path in broken_bags(tmp_path).items():
         code, log = replay(tmp_path, str(path))
@@ -146,7 +148,6 @@ def test_replay_refuses_broken_bags_with_exit_code_2(tmp_path):
     assert code == 2 and "not in the bag" in log
 
 
-@pytest.mark.skipif(not node_built("replay"), reason="arm_sim is not built (colcon build)")
 def test_replay_skips_corrupt_messages_and_publishes_the_rest(tmp_path):
     with BagWriter(tmp_path / "bag") as writer:
         writer.write_message("/camera/color/image_raw", 1_000_000, image(1.0))
@@ -164,20 +165,16 @@ def test_replay_skips_corrupt_messages_and_publishes_the_rest(tmp_path):
     assert [round(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, 3) for m in received] == [1.0, 3.0]
 
 
-@pytest.mark.skipif(not node_built("record"), reason="arm_sim is not built (colcon build)")
 def test_record_refuses_an_existing_output_with_exit_code_2(tmp_path):
     (tmp_path / "exists").mkdir()
-    process = NodeProcess("record", tmp_path / "record.log", args=(str(tmp_path / "exists"),))
+    process = start_node("record", tmp_path, args=(str(tmp_path / "exists"),))
     code = process.wait(60.0)
     if code is None:
         process.stop()
     assert code == 2 and "exists already" in process.log() and not tracebacks(process.log())
 
 
-@pytest.mark.skipif(not node_built("replay"), reason="arm_sim is not built (colcon build)")
 def test_replay_keeps_the_bag_timing_publishes_clock_and_loops_with_increasing_stamps(tmp_path):
-    from rosgraph_msgs.msg import Clock
-
     period_ns = 100_000_000  # a 10 Hz camera
     write_bag(
         tmp_path / "bag", [("/camera/color/image_raw", (k + 1) * period_ns, image((k + 1) * 0.1)) for k in range(5)]

@@ -4,10 +4,13 @@ crash; then kill -9 of the reconstruction node mid-run and its restart."""
 import json
 
 import pytest
-from robustness_nodes import reconstruction_params
 
-from arm_benchmarks.robustness import Probe, node_built, render_frames, write_camera_bag
-from arm_benchmarks.robustness_load import run_fault, run_load, start_graph, stop_graph
+from arm_benchmarks.robustness.bags import write_camera_bag
+from arm_benchmarks.robustness.frames import render_frames
+from arm_benchmarks.robustness.load import run_fault, run_load, start_graph, stop_graph
+from arm_benchmarks.robustness.probe import Probe
+
+from ros_helpers import require_built, require_reconstruction_params
 
 LOAD_S = 20.0
 CAMERA_HZ = 30.0
@@ -16,10 +19,8 @@ FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": False}
 
 @pytest.fixture(scope="module")
 def run(robustness_logs):
-    params = reconstruction_params()
-    for key in ("segmentation", "reconstruction", "planner", "replay"):
-        if not node_built(key):
-            pytest.skip(f"{key} is not built")
+    require_built("segmentation", "reconstruction", "planner", "replay")
+    params = require_reconstruction_params()
     bag = robustness_logs / "camera_30hz"
     write_camera_bag(bag, render_frames(5, seed=3, count=3), CAMERA_HZ)
     log_dir = robustness_logs / "graph"
@@ -48,9 +49,12 @@ def test_latest_frame_processing_keeps_the_lag_bounded(run):
     # a queue would add (30 Hz x processing time - 1) frames of lag every second
     assert lag["last_third_median_s"] - lag["first_third_median_s"] < 1.0, lag
     assert lag["max_s"] < 5.0, lag
-    dropped = float(run["load"]["diagnostics"]["segmentation"].get("stale_messages_dropped", 0))
-    received = float(run["load"]["diagnostics"]["segmentation"].get("messages_received", 0))
-    assert received > 0 and dropped >= 0
+    diagnostics = run["load"]["diagnostics"]["segmentation"]
+    received = float(diagnostics.get("messages_received", 0))  # rgb, depth, camera_info and pose
+    published = float(diagnostics.get("frames_published", 0))
+    # a 30 Hz camera outruns segmentation: latest-frame processing skips the frames it cannot keep up
+    # with (a queue would segment every one of them, late)
+    assert 0 < published < received / 4, diagnostics
 
 
 def test_memory_growth_below_50_mb(run):

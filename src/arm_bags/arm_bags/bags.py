@@ -5,8 +5,7 @@ Bags are written and read with the pure-Python `rosbags` package in the rosbag2 
 Messages are stored as the CDR bytes rclpy itself produces; the message definitions (the standard
 Jazzy set plus arm_interfaces) come from a rosbags typestore. Timestamps are integer nanoseconds.
 
-rclpy is imported lazily and only by `serialize`/`deserialize`: writing and reading raw CDR needs
-nothing but rosbags. The stamp helpers at the end serve replay: header stamps in nanoseconds,
+The stamp helpers at the end serve replay: header stamps in nanoseconds,
 shifting them, the per-pass offset of a looping bag and grouping camera messages into frames.
 """
 
@@ -20,6 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from builtin_interfaces.msg import Time
+from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -76,15 +76,11 @@ def message_class(msgtype: str):
 
 
 def serialize(msg) -> bytes:
-    from rclpy.serialization import serialize_message
-
     return serialize_message(msg)
 
 
 def deserialize(raw: bytes, msgtype: str):
     """CDR bytes -> rclpy message. Raises BagError on bytes that do not decode as msgtype."""
-    from rclpy.serialization import deserialize_message
-
     cls = message_class(msgtype)
     try:
         return deserialize_message(bytes(raw), cls)

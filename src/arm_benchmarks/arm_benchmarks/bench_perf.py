@@ -15,7 +15,7 @@ PERF_MEASUREMENTS = (
     ("arm_benchmarks.perf_sim", "measure"),
     ("arm_benchmarks.perf_segmentation", "measure"),
     ("arm_benchmarks.perf_reconstruction", "measure"),
-    ("arm_reconstruction.train", "measure_training"),
+    ("arm_reconstruction.training.measure", "measure_training"),
     ("arm_benchmarks.perf_planner", "measure"),
 )
 

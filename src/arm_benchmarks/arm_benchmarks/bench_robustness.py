@@ -21,12 +21,30 @@ import sys
 import tempfile
 import time
 
+import matplotlib
 import numpy as np
+from sensor_msgs.msg import Image
 from tqdm import tqdm
 
-from arm_benchmarks import robustness
-from arm_benchmarks.robustness import ROOT, NodeProcess, Probe, node_built, render_frames, write_camera_bag
-from arm_ros.common import use_private_domain
+from arm_bags.bags import BagError, BagReader
+from arm_benchmarks.robustness.bags import broken_bags, write_camera_bag
+from arm_benchmarks.robustness.cases.parameters import run_parameter_validation
+from arm_benchmarks.robustness.cases.planner import run_planner_bad_inputs
+from arm_benchmarks.robustness.cases.reconstruction import run_reconstruction_bad_inputs
+from arm_benchmarks.robustness.cases.segmentation import run_segmentation_bad_inputs
+from arm_benchmarks.robustness.cases.sim import run_sim_bad_inputs
+from arm_benchmarks.robustness.frames import render_frames
+from arm_benchmarks.robustness.load import run_fault, run_load, start_graph, stop_graph
+from arm_benchmarks.robustness.logs import tracebacks
+from arm_benchmarks.robustness.messages import camera_messages
+from arm_benchmarks.robustness.nodes import ROOT, reconstruction_checkpoint, reconstruction_params
+from arm_benchmarks.robustness.parameters import convention_report
+from arm_benchmarks.robustness.probe import Probe
+from arm_ros.common import sensor_qos, use_private_domain
+from arm_ros.processes import NodeProcess, node_built
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
 PHASES = (
     "bad_input_segmentation",
@@ -50,8 +68,6 @@ def _frames(width: int, height: int) -> dict:
 
 
 def _with_node(key: str, log_dir: pathlib.Path, runner, **node_kwargs) -> dict:
-    from arm_benchmarks.robustness import convention_report
-
     process = NodeProcess(key, log_dir / f"{key}.log", **node_kwargs)
     probe = Probe()
     try:
@@ -65,8 +81,6 @@ def _with_node(key: str, log_dir: pathlib.Path, runner, **node_kwargs) -> dict:
 
 
 def phase_bad_input_segmentation(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_cases import run_segmentation_bad_inputs
-
     frames = _frames(args.width, args.height)
     return _with_node(
         "segmentation",
@@ -77,9 +91,7 @@ def phase_bad_input_segmentation(args, work: pathlib.Path) -> dict:
 
 
 def phase_bad_input_reconstruction(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_cases import run_reconstruction_bad_inputs
-
-    params = robustness.reconstruction_params()
+    params = reconstruction_params()
     if params is None:
         return {"skipped": "no reconstruction checkpoint"}
     frames = _frames(args.width, args.height)
@@ -92,25 +104,19 @@ def phase_bad_input_reconstruction(args, work: pathlib.Path) -> dict:
 
 
 def phase_bad_input_planner(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_cases import run_planner_bad_inputs
-
     return _with_node("planner", work, run_planner_bad_inputs, params={**FAST_PLANNER, "execute": True})
 
 
 def phase_bad_input_sim(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_cases import run_sim_bad_inputs
-
     params = {"n_objects": 3, "camera_rate_hz": 0.2, "width": 160, "height": 120}
     return _with_node("sim", work, run_sim_bad_inputs, params=params)
 
 
 def phase_bags(args, work: pathlib.Path) -> dict:
     """Broken bags through the core reader and through `replay` (which must exit 2, no traceback)."""
-    from arm_bags.bags import BagError, BagReader
-
     frame = render_frames(2, 64, 48, seed=0)[0]
-    good = [("/" + t, (i + 1) * 10**8, m) for i, (t, m) in enumerate(robustness.camera_messages(frame, 1.0).items())]
-    cases = robustness.broken_bags(work, good)
+    good = [("/" + t, (i + 1) * 10**8, m) for i, (t, m) in enumerate(camera_messages(frame, 1.0).items())]
+    cases = broken_bags(work, good)
     results = []
     for name, path in cases.items():
         try:
@@ -124,14 +130,12 @@ def phase_bags(args, work: pathlib.Path) -> dict:
         if code is None:
             process.stop()
         log = process.log()
-        ok = core.startswith("BagError") and code == 2 and not robustness.tracebacks(log)
+        ok = core.startswith("BagError") and code == 2 and not tracebacks(log)
         results.append({"name": name, "core": core, "replay_exit_code": code, "ok": ok})
     return {"inputs_tried": len(results), "cases": results, "cases_failed": [r["name"] for r in results if not r["ok"]]}
 
 
 def phase_parameters(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_cases import run_parameter_validation
-
     results = run_parameter_validation(work)
     return {
         "inputs_tried": len(results),
@@ -144,10 +148,6 @@ def _delivery(work: pathlib.Path, bag: pathlib.Path, reliability: str, seconds: 
     """Over `seconds` of a looping 30 Hz camera bag: the fraction of rgb + depth images a plain
     subscriber with this reliability receives (transport only), and the segmented frames per second
     segmentation_node publishes with this image_reliability (transport + processing)."""
-    from sensor_msgs.msg import Image
-
-    from arm_ros.common import sensor_qos
-
     seg = NodeProcess(
         "segmentation", work / f"segmentation_{reliability}.log", params={"image_reliability": reliability}
     )
@@ -198,9 +198,7 @@ def phase_qos(args, work: pathlib.Path) -> dict:
 
 
 def phase_load_fault(args, work: pathlib.Path) -> dict:
-    from arm_benchmarks.robustness_load import run_fault, run_load, start_graph, stop_graph
-
-    params = robustness.reconstruction_params()
+    params = reconstruction_params()
     if params is None:
         return {"skipped": "no reconstruction checkpoint"}
     bag = work / "camera_bag"
@@ -233,10 +231,6 @@ def _keep_logs(work: pathlib.Path, target: pathlib.Path, lines: int = 300) -> No
 
 
 def _plot(summary: dict, out: pathlib.Path) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     written = []
     load = summary["phases"].get("load_fault", {}).get("load")
@@ -397,7 +391,7 @@ def main(argv=None) -> int:
     summary = {
         "command": "bench_robustness " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": f"{os.cpu_count()} CPU cores, {os.uname().machine}",
-        "reconstruction_checkpoint": str(robustness.reconstruction_checkpoint()),
+        "reconstruction_checkpoint": str(reconstruction_checkpoint()),
         "figures": _figures(phases),
         "phases": phases,
     }

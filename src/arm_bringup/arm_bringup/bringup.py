@@ -2,6 +2,8 @@
 ROS 2 install use `ros2 launch arm_bringup arm_pipeline.launch.py` instead).
 
 Usage: bringup [--nodes sim segmentation reconstruction planner] [--log-dir DIR]
+
+When the sim runs, the other nodes run on its simulated time (use_sim_time:=true, /clock).
 """
 
 import argparse
@@ -21,16 +23,19 @@ def node_available(key: str) -> bool:
 
 
 class Graph:
-    """The node processes of one bring-up; stops them all on exit, SIGINT first."""
+    """The node processes of one bring-up; stops them all on exit, SIGINT first. With use_sim_time,
+    every node but the sim (the clock source) runs on /clock."""
 
-    def __init__(self, log_dir: pathlib.Path):
+    def __init__(self, log_dir: pathlib.Path, use_sim_time: bool = False):
         self.log_dir = pathlib.Path(log_dir)
+        self.use_sim_time = use_sim_time
         self.processes: dict[str, NodeProcess] = {}
         self.log_dir.mkdir(parents=True, exist_ok=True)
 
     def start(self, key: str, *ros_args: str) -> NodeProcess:
         """Start a node with its installed parameter file; ros_args follow --ros-args (-p, -r)."""
-        process = NodeProcess(key, self.log_dir / f"{key}.log", ros_args=ros_args)
+        params = {"use_sim_time": True} if self.use_sim_time and key != "sim" else {}
+        process = NodeProcess(key, self.log_dir / f"{key}.log", params=params, ros_args=ros_args)
         self.processes[key] = process
         return process
 
@@ -52,7 +57,7 @@ def main() -> int:
     parser.add_argument("--nodes", nargs="*", default=list(GRAPH_NODES), choices=list(GRAPH_NODES))
     parser.add_argument("--log-dir", default="log/bringup")
     args = parser.parse_args()
-    with Graph(pathlib.Path(args.log_dir)) as graph:
+    with Graph(pathlib.Path(args.log_dir), use_sim_time="sim" in args.nodes) as graph:
         for key in args.nodes:
             if node_available(key):
                 graph.start(key)

@@ -18,6 +18,7 @@ CONFIG = os.path.join(get_package_share_directory("arm_bringup"), "config")
 
 def generate_launch_description():
     use_sim = LaunchConfiguration("use_sim")
+    sim_time = {"use_sim_time": use_sim}  # the graph runs on the sim's /clock when the sim runs
     nodes = [
         Node(
             package="arm_sim",
@@ -28,13 +29,17 @@ def generate_launch_description():
         Node(
             package="arm_segmentation",
             executable="segmentation_node",
-            parameters=[os.path.join(CONFIG, "segmentation_node.yaml")],
+            parameters=[os.path.join(CONFIG, "segmentation_node.yaml"), sim_time],
         ),
         Node(
             package="arm_reconstruction",
             executable="reconstruction_node",
-            parameters=[os.path.join(CONFIG, "reconstruction_node.yaml")],
+            parameters=[os.path.join(CONFIG, "reconstruction_node.yaml"), sim_time],
         ),
-        Node(package="arm_planner", executable="plan_node", parameters=[os.path.join(CONFIG, "plan_node.yaml")]),
+        Node(
+            package="arm_planner",
+            executable="plan_node",
+            parameters=[os.path.join(CONFIG, "plan_node.yaml"), sim_time],
+        ),
     ]
     return LaunchDescription([DeclareLaunchArgument("use_sim", default_value="true")] + nodes)

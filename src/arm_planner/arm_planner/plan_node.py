@@ -18,6 +18,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.duration import Duration
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -81,7 +82,7 @@ class PlanNode(Node):
 
         self._lock = threading.Lock()
         self._objects = None  # (objects, table_height_m, dropped) from the latest /arm/meshes
-        self._joints = None  # (arm_q, opening, wall time) from the latest valid /joint_states
+        self._joints = None  # (arm_q, opening, node-clock ns at receipt) from the latest valid /joint_states
         self._joint_error = ""
         self._busy = False
         self.goals = self.refusals = self.meshes_received = self.meshes_rejected = 0
@@ -133,7 +134,7 @@ class PlanNode(Node):
             self.errors.error("joint_states", f"ignoring joint states: {error}")
             return
         with self._lock:
-            self._joints = (arm_q, opening, time.monotonic())
+            self._joints = (arm_q, opening, self.get_clock().now().nanoseconds)
             self._joint_error = ""
 
     # --- action ------------------------------------------------------------------------------
@@ -152,7 +153,8 @@ class PlanNode(Node):
             return None, f"latest joint states are invalid: {error}", objects
         if joints is None:
             return None, "no joint states received yet", objects
-        if self.joint_state_timeout_s > 0 and time.monotonic() - joints[2] > self.joint_state_timeout_s:
+        age_s = 1e-9 * (self.get_clock().now().nanoseconds - joints[2])  # ROS time: simulated with use_sim_time
+        if self.joint_state_timeout_s > 0 and age_s > self.joint_state_timeout_s:
             return None, f"joint states are older than {self.joint_state_timeout_s} s", objects
         return joints, "", objects
 
@@ -253,7 +255,11 @@ class PlanNode(Node):
             executed.points.extend(sent.points)
             if last:
                 break
-            time.sleep(float(result.times_s[chunk - 1]))
+            # the executed prefix runs on the controller's (the sim's) clock: wait on the node's clock,
+            # which follows /clock with use_sim_time:=true; other callbacks run on the executor's threads
+            waited = self.get_clock().sleep_for(Duration(seconds=float(result.times_s[chunk - 1])))
+            if not waited:  # shutdown
+                break
             resume = resume_point(result.states, chunk)
             replanned = self._plan_once(goal_handle, task, goal, resume, start_com)
             if not replanned.planned:

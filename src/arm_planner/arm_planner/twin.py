@@ -1,7 +1,7 @@
 """The planner's MuJoCo twin: reconstructed objects + table + robot, built by arm_sim's world builder.
 
 Objects arrive as (id, T_world_object, mesh, convex parts) in the object frame. Objects without
-convex parts are decomposed here (CoACD through arm_sim's cached decomposition, the convex hull as
+convex parts are decomposed here (arm_reconstruction's plane-split decomposer, the convex hull as
 fallback). Degenerate parts are dropped; an object left without usable geometry is skipped and
 reported. The model is rebuilt only when the set of object geometries changes; new poses of the
 same objects only change the twin's initial state.
@@ -19,6 +19,11 @@ import trimesh
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.rewards import TargetGeometry
 from arm_planner.robot_spec import RobotSpec
+from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
+from arm_sim import robot as sim_robot
+from arm_sim.objects import ObjectModel
+from arm_sim.scenes import PlacedObject, Scene
+from arm_sim.world import build_world, object_body_name
 
 MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
@@ -66,18 +71,16 @@ class TwinObject:
 
 def panda_robot_spec() -> RobotSpec:
     """The arm_sim robot: 7 Panda joints with position servos, one gripper servo (finger opening, m)."""
-    from arm_sim import robot
-
     return RobotSpec(
-        arm_joints=tuple(robot.JOINT_NAMES),
-        gripper_actuator=robot.ACTUATOR_NAMES[-1],
-        gripper_open=float(robot.GRIPPER_OPEN_M),
+        arm_joints=tuple(sim_robot.JOINT_NAMES),
+        gripper_actuator=sim_robot.ACTUATOR_NAMES[-1],
+        gripper_open=float(sim_robot.GRIPPER_OPEN_M),
         gripper_closed=0.0,
-        tcp_body=robot.HAND_NAME,
-        tcp_offset_m=(0.0, 0.0, float(robot.TCP_OFFSET_M)),
+        tcp_body=sim_robot.HAND_NAME,
+        tcp_offset_m=(0.0, 0.0, float(sim_robot.TCP_OFFSET_M)),
         max_joint_rate_rad_s=1.5,
         max_gripper_rate=0.1,
-        trajectory_joint_names=tuple(robot.JOINT_NAMES) + (robot.FINGER_JOINT_NAMES[0],),
+        trajectory_joint_names=tuple(sim_robot.JOINT_NAMES) + (sim_robot.FINGER_JOINT_NAMES[0],),
     )
 
 
@@ -96,14 +99,7 @@ def _valid_hull(vertices: np.ndarray) -> trimesh.Trimesh | None:
 
 
 def decompose(mesh: trimesh.Trimesh, max_parts: int = MAX_DECOMPOSITION_PARTS) -> list[trimesh.Trimesh]:
-    """Convex parts of a watertight mesh: arm_reconstruction's fast plane-split decomposer when it is
-    installed, else CoACD through arm_sim's on-disk cache."""
-    try:
-        from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
-    except ImportError:
-        from arm_sim.objects import decompose_cached
-
-        return decompose_cached(mesh, max_parts)
+    """Convex parts of a watertight mesh by arm_reconstruction's fast plane-split decomposer."""
     global _DECOMPOSER
     if _DECOMPOSER is None:
         _DECOMPOSER = ConvexDecomposer(DecompositionSettings(max_parts=max_parts))
@@ -151,10 +147,6 @@ class Twin:
         timestep_s: float = 0.01,
         robot: RobotSpec | None = None,
     ):
-        from arm_sim.objects import ObjectModel
-        from arm_sim.scenes import PlacedObject, Scene
-        from arm_sim.world import build_world, object_body_name
-
         if not np.isfinite(table_height_m):
             raise TwinError("table height is not finite")
         self.robot = robot or panda_robot_spec()
@@ -214,8 +206,6 @@ class Twin:
         mujoco.mj_resetData(model, data)
         robot = self.robot.resolve(model)
         data.qpos[robot.qpos_adr] = arm_q
-        from arm_sim import robot as sim_robot
-
         for name in sim_robot.FINGER_JOINT_NAMES:
             data.qpos[model.joint(name).qposadr[0]] = gripper_opening_m
         for obj_id, T in (poses or {}).items():

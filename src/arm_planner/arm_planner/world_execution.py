@@ -18,6 +18,7 @@ import numpy as np
 from arm_planner.rewards import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.twin import TwinObject
+from arm_sim import robot
 
 HOLD_AFTER_S = 0.5
 
@@ -51,8 +52,6 @@ class WorldSync:
     writes the world's robot state and tracked object poses and velocities into the twin."""
 
     def __init__(self, session: ManipulationSession, world, objects: list[TwinObject], period_steps: int):
-        from arm_sim import robot
-
         self.session, self.world, self.period = session, world, int(period_steps)
         self.control_dt_s = session.config.mppi.control_dt_s
         self.objects = {o.id: o for o in objects}
@@ -108,8 +107,6 @@ def run_in_world(
 ) -> WorldRun:
     """Plan on `objects` and execute in `world` (a SimWorld of the true scene, robot at home);
     period_steps 0 = open loop. Object id n is the world's object n - 1."""
-    from arm_sim import robot
-
     body = world.object_ids[target_index]
     start = world.data.xipos[body].copy()
     session.set_objects(objects, table_height_m)

@@ -4,8 +4,12 @@ import torch
 
 from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
 from arm_reconstruction.checkpoint import load_checkpoint, read_checkpoint
+from arm_reconstruction.dataset import VoxelDataset
 from arm_reconstruction.model_cards import write_model_card
-from arm_reconstruction.train import PRIORS, TrainConfig, losses_for_batch, main, train, voxel_metrics
+from arm_reconstruction.train import main
+from arm_reconstruction.training.config import PRIORS, TrainConfig, losses_for_batch
+from arm_reconstruction.training.evaluation import voxel_metrics
+from arm_reconstruction.training.loop import train
 
 
 @pytest.fixture(scope="module")
@@ -21,8 +25,6 @@ def _config(root, tmp_path, variant="arm", steps=3, **overrides):
 
 
 def test_variants_use_their_priors(box_data):
-    from arm_reconstruction.dataset import VoxelDataset
-
     batch = VoxelDataset(box_data, "train").batch(np.arange(4))
     logits = torch.randn(4, 16, 16, 16, requires_grad=True)
     for variant, priors in PRIORS.items():

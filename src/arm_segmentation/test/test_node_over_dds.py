@@ -1,8 +1,5 @@
 """segmentation_node in its own process, fed over real DDS by this test."""
 
-import os
-import signal
-import subprocess
 import time
 
 import numpy as np
@@ -22,31 +19,10 @@ from std_msgs.msg import Header  # noqa: E402
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
 from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image  # noqa: E402
 from arm_ros.conversions.poses import matrix_to_pose  # noqa: E402
-from arm_ros.processes import config_file, executable  # noqa: E402
+from arm_ros.processes import NodeProcess, executable, node_built  # noqa: E402
 from arm_segmentation.metrics import segmentation_metrics  # noqa: E402
 
-EXECUTABLE = executable("segmentation")
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
-
-
-def start(*params):
-    cmd = [str(EXECUTABLE), "--ros-args", "--params-file", str(config_file("segmentation_node.yaml"))]
-    for p in params:
-        cmd += ["-p", p]
-    return subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=os.environ.copy(), start_new_session=True, text=True
-    )
-
-
-def stop(process) -> tuple[int, str]:
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-    return process.returncode, process.stdout.read()
 
 
 def spin_until(node, predicate, timeout_s):
@@ -60,8 +36,8 @@ def spin_until(node, predicate, timeout_s):
 
 @pytest.fixture
 def probe():
-    if not EXECUTABLE.exists():
-        pytest.skip("segmentation_node is not installed (colcon build)")
+    if not node_built("segmentation"):
+        pytest.fail(f"segmentation_node is not built ({executable('segmentation')}); run `make setup`")
     rclpy.init()
     node = rclpy.create_node("segmentation_probe")
     yield node
@@ -89,14 +65,18 @@ def frame_messages(stamp_s, rgb, depth, K, labels=None):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("ground_truth", [False, True])
-def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_truth):
+def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_truth, tmp_path):
     boxes = [
         Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
         Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60)),
     ]
     rgb, depth, gt, K = render(boxes, CAMERA)
     depth = add_noise(depth, np.random.default_rng(0))
-    node = start(f"use_ground_truth_masks:={str(ground_truth).lower()}", "image_reliability:=reliable")
+    node = NodeProcess(
+        "segmentation",
+        tmp_path / "segmentation.log",
+        params={"use_ground_truth_masks": ground_truth, "image_reliability": "reliable"},
+    )
     got = {"frames": [], "overlay": [], "diag": []}
     probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
     probe.create_subscription(Image, "arm/segmentation/overlay", got["overlay"].append, 10)
@@ -163,6 +143,7 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
             assert segmentation_metrics(predicted, gt)["overlap_f"] > 0.9
         assert spin_until(probe, lambda: any(int(d.get("frames_published", 0)) >= 1 for d in diagnostics()), 5.0)
     finally:
-        code, output = stop(node)
+        code = node.stop(timeout_s=10.0)
+    output = node.log()
     assert code == 0, output
     assert "rejected" in output

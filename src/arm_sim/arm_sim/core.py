@@ -2,6 +2,7 @@
 
 import time
 
+import mujoco
 import numpy as np
 
 from arm_core.camera import look_at
@@ -49,8 +50,6 @@ class SimSession:
         if target is not None:
             lo, hi = self.world.model.actuator_ctrlrange[:8].T
             self.world.data.ctrl[:8] = np.clip(target, lo, hi)
-        import mujoco
-
         substeps = max(1, int(round(dt_s / self.world.model.opt.timestep)))
         mujoco.mj_step(self.world.model, self.world.data, nstep=substeps)
         self.time_s += substeps * self.world.model.opt.timestep

@@ -11,6 +11,7 @@ import pathlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import coacd
 import numpy as np
 import trimesh
 
@@ -271,8 +272,6 @@ def load_mesh_file(path: pathlib.Path, max_parts: int = 12) -> ObjectModel:
 
 def decompose_cached(mesh: trimesh.Trimesh, max_parts: int = 12) -> list[trimesh.Trimesh]:
     """Convex decomposition of an external mesh with CoACD, cached on disk by mesh hash."""
-    import coacd
-
     digest = hashlib.sha256(mesh.vertices.tobytes() + mesh.faces.tobytes()).hexdigest()[:24]
     cache = pathlib.Path.home() / ".cache" / "arm_ros" / "coacd" / f"{digest}_{max_parts}.npz"
     if cache.exists():

@@ -5,8 +5,9 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
@@ -80,7 +81,7 @@ class SimNode(Node):
         self.pub_pose = self.create_publisher(PoseStamped, "camera/pose", qos)
         self.pub_labels = self.create_publisher(Image, "sim/ground_truth/labels", qos)
         self.pub_joints = self.create_publisher(JointState, "joint_states", 10)
-        self.pub_clock = self.create_publisher(Clock, "clock", 10)
+        self.pub_clock = self.create_publisher(ClockMsg, "clock", 10)
         self.pub_truth_poses = self.create_publisher(PoseArray, "sim/ground_truth/poses", 10)
         self.pub_truth = self.create_publisher(ReconstructedObjectArray, "sim/ground_truth/objects", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
@@ -89,7 +90,8 @@ class SimNode(Node):
         self._next_render_s = 0.0
         self._render_ms = 0.0
         self.frames_published = 0
-        self.create_timer(1.0 / self.physics_rate_hz, self.on_tick)
+        # the sim is the clock source: it ticks on the steady clock, also when run with use_sim_time:=true
+        self.create_timer(1.0 / self.physics_rate_hz, self.on_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_ground_truth()
         self.get_logger().info(
             f"sim ready: {len(self.session.scene.objects)} objects (seed {seed}), camera {self.camera_rate_hz} Hz"
@@ -118,7 +120,7 @@ class SimNode(Node):
         if self._targets is not None and len(self._targets):
             target, self._targets = self._targets[0], self._targets[1:]
         self.session.step(1.0 / self.physics_rate_hz, target)
-        self.pub_clock.publish(Clock(clock=self.stamp()))
+        self.pub_clock.publish(ClockMsg(clock=self.stamp()))
         self.publish_joint_state()
         if self.session.time_s + 1e-9 >= self._next_render_s:
             self._next_render_s = self.session.time_s + 1.0 / self.camera_rate_hz

@@ -9,8 +9,15 @@ import signal
 import time
 
 import numpy as np
+from rclpy.action import ActionClient
+from sensor_msgs.msg import CameraInfo
 
-from arm_benchmarks.robustness import NodeProcess, stamp_of, tracebacks
+from arm_benchmarks.robustness.logs import tracebacks
+from arm_benchmarks.robustness.messages import stamp_of
+from arm_interfaces.action import Manipulate
+from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_ros.common import latched_qos, sensor_qos
+from arm_ros.processes import NodeProcess
 
 GRAPH_ORDER = ("replay", "segmentation", "reconstruction", "planner")
 # Fast DDS 2.14's shared-memory transport can leave a port of a kill -9'd process locked, and a
@@ -57,11 +64,6 @@ class GraphWatch:
     """Probe subscriptions on the graph's camera and outputs, with lag bookkeeping."""
 
     def __init__(self, probe):
-        from sensor_msgs.msg import CameraInfo
-
-        from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
-        from arm_ros.common import latched_qos, sensor_qos
-
         self.probe = probe
         self.latest_camera_s = float("nan")
         self.lags = {"segmentation": [], "reconstruction": []}
@@ -193,10 +195,6 @@ def run_fault(
 ) -> dict:
     """kill -9 the reconstruction node; during the outage the planner must keep the last meshes and
     still plan on them; after a restart (log in restart_log, GRAPH_DDS_ENV) new meshes must flow again."""
-    from rclpy.action import ActionClient
-
-    from arm_interfaces.action import Manipulate
-
     planner_objects_before = probe.diagnostic_number("plan_node", "twin_objects", 0)
     frames_before = watch.totals()["segmentation"]
     graph["reconstruction"].kill9()
@@ -256,8 +254,6 @@ def run_fault(
 def frames_to_a_fresh_reader(probe, duration_s: float) -> dict:
     """Segmented frames a newly created subscription receives in duration_s, and how many the
     segmentation node says it published meanwhile: tells a wedged publisher from a wedged reader."""
-    from arm_interfaces.msg import SegmentedFrame
-
     published_before = probe.diagnostic_number("segmentation_node", "frames_published", 0)
     fresh = probe.record(SegmentedFrame, "arm/segmented_frame", 10, keep=1)
     probe.wait_until(lambda: False, duration_s)

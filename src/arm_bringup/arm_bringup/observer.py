@@ -1,0 +1,56 @@
+"""The demo's view of the graph: the latest message of every topic it reports on, and diagnostics."""
+
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseStamped
+from sensor_msgs.msg import CameraInfo, Image, JointState
+
+from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_ros.common import latched_qos, sensor_qos
+from arm_ros.conversions.images import depth_to_metres, image_to_numpy
+
+
+class Observer:
+    """Collects the latest message of every topic the demo reports on."""
+
+    def __init__(self, node):
+        self.node, self.latest, self.counts = node, {}, {}
+        self.diagnostics: dict[str, dict] = {}
+        qos = sensor_qos("reliable")
+        for topic, kind, profile in [
+            ("camera/color/image_raw", Image, qos),
+            ("camera/depth/image_raw", Image, qos),
+            ("camera/camera_info", CameraInfo, qos),
+            ("camera/pose", PoseStamped, qos),
+            ("sim/ground_truth/labels", Image, qos),
+            ("arm/segmented_frame", SegmentedFrame, 2),
+            ("arm/meshes", ReconstructedObjectArray, latched_qos()),
+            ("sim/ground_truth/objects", ReconstructedObjectArray, latched_qos()),
+            ("joint_states", JointState, 10),
+            ("sim/ground_truth/poses", PoseArray, 10),
+        ]:
+            node.create_subscription(kind, topic, lambda m, t=topic: self._store(t, m), profile)
+        node.create_subscription(DiagnosticArray, "diagnostics", self._diag, 50)
+
+    def _store(self, topic, msg):
+        self.latest[topic] = msg
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def _diag(self, msg):
+        for status in msg.status:
+            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def wait(self, topics, timeout_s: float, min_count: int = 1) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+            if all(self.counts.get(t, 0) >= min_count for t in topics):
+                return True
+        return False
+
+    def frame(self):
+        rgb = image_to_numpy(self.latest["camera/color/image_raw"])
+        depth = depth_to_metres(self.latest["camera/depth/image_raw"])
+        return rgb, depth

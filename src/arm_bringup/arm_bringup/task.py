@@ -1,0 +1,75 @@
+"""The demo's manipulation request: one Manipulate goal for the most visible reachable reconstructed
+object, judged in the simulator by how the true object moved."""
+
+import time
+
+import numpy as np
+import rclpy
+from rclpy.action import ActionClient
+
+from arm_bringup.scenes import objects_to_scene
+from arm_interfaces.action import Manipulate
+from arm_ros.conversions.poses import pose_to_matrix
+from arm_sim.world import ROBOT_BASE_XY
+
+
+def run_task(node, observer, meshes, truth, task: str) -> dict:
+    """Send one manipulation request for the most visible reconstructed object; judge it in the sim."""
+    client = ActionClient(node, Manipulate, "arm/manipulate")
+    if not client.wait_for_server(timeout_sec=60.0):
+        return {"error": "plan_node action server not available"}
+    shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
+    reachable = [o for o in meshes.objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < 0.7]
+    target = max(reachable or meshes.objects, key=lambda o: o.visible_fraction)
+    goal = Manipulate.Goal(task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id)
+    if task == "push":
+        goal.goal_displacement.x, goal.goal_displacement.y = 0.05, -0.30
+    elif task == "rearrange":
+        goal.goal_displacement.x, goal.goal_displacement.y = 0.20, 0.20
+    T_target = pose_to_matrix(target.pose)
+    _, gt = objects_to_scene(truth)
+    gt_id, _ = min(gt, key=lambda g: np.linalg.norm(g[1].centroid - T_target[:3, 3]))
+    start = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
+    t0 = time.monotonic()
+    future = client.send_goal_async(goal)
+    while not future.done():
+        rclpy.spin_once(node, timeout_sec=0.05)
+    handle = future.result()
+    if not handle.accepted:
+        return {"error": "goal rejected"}
+    result_future = handle.get_result_async()
+    while not result_future.done() and time.monotonic() - t0 < 400:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    if not result_future.done():
+        return {"error": "planning timed out"}
+    result = result_future.result().result
+    plan_s = time.monotonic() - t0
+    duration = 0.0
+    if result.trajectory.points:
+        last = result.trajectory.points[-1].time_from_start
+        duration = last.sec + 1e-9 * last.nanosec
+    # the sim executes the published trajectory in simulated time (50 joint states per simulated second)
+    wanted_states = observer.counts.get("joint_states", 0) + int(duration * 50) + 50
+    observer.wait(["joint_states"], duration * 4 + 20.0, wanted_states)
+    observer.wait(["sim/ground_truth/poses"], 10.0, observer.counts.get("sim/ground_truth/poses", 0) + 2)
+    end = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
+    moved = end - start
+    if task == "grasp":
+        success, error = bool(moved[2] >= 0.05), max(0.0, 0.05 - float(moved[2]))
+    else:
+        wanted = np.array([goal.goal_displacement.x, goal.goal_displacement.y])
+        error = float(np.linalg.norm(moved[:2] - wanted))
+        success = error <= 0.025
+    return {
+        "task": task,
+        "target_id": int(target.id),
+        "truth_id": int(gt_id),
+        "planned_success": bool(result.success),
+        "message": result.message,
+        "predicted_error_m": round(float(result.final_error_m), 4),
+        "planning_s": round(plan_s, 1),
+        "trajectory_s": round(duration, 2),
+        "target_displacement_m": np.round(moved, 4).tolist(),
+        "success_in_sim": success,
+        "error_in_sim_m": round(error, 4),
+    }
