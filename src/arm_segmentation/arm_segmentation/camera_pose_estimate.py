@@ -1,0 +1,210 @@
+"""T_world_camera from one depth image, for cameras without a calibrated camera-to-table transform.
+
+The camera is assumed to look down at a table. The support plane is found by sequential RANSAC
+(batched hypotheses, vectorized over points) on a random subsample of the valid depth pixels, each
+plane refined by weighted least squares on its inliers. The chosen support is the largest plane the
+camera looks down at; among the planes parallel to it that cover at least min_support_area_m2 (or
+half its area) the highest one, i.e. the nearest to the camera, wins: a table over a floor.
+
+World frame of the estimate (gravity-aligned, metres):
+  z   the plane normal, pointing up (towards the camera); the table top is z = 0;
+  x   the optical axis projected on the plane (image up projected when the camera looks within
+      1 degree of straight down), so yaw is fixed: the camera looks along +x;
+  origin  the foot of the camera on the plane: the camera sits at (0, 0, h), h its height above
+      the table (always defined, also when the camera looks up past the table's horizon).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arm_core.camera import backproject
+
+
+class CameraPoseError(ValueError):
+    """No support plane found; the message says why."""
+
+
+@dataclass
+class CameraPoseEstimate:
+    T_world_camera: np.ndarray  # 4x4 float64, optical frame in a gravity-aligned world: z up, table top z = 0, camera above it
+    inlier_fraction: float  # share of valid depth pixels on the plane
+    plane_camera: np.ndarray  # (4,) unit normal n (pointing towards the camera) and d, n.p + d = 0 in the camera frame, metres
+
+
+@dataclass
+class CameraPoseParams:
+    max_points: int = 20000  # valid pixels subsampled for the search
+    hypotheses: int = 256  # RANSAC planes tried per search
+    max_planes: int = 5  # planes extracted one after the other
+    inlier_base_m: float = 0.004  # inlier distance at depth 0 ...
+    inlier_quadratic_per_m: float = 0.004  # ... plus this times depth^2 (depth noise grows with distance^2)
+    min_valid_pixels: int = 1000
+    min_inlier_fraction: float = 0.05  # smallest share of valid pixels a plane must hold
+    min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table
+    parallel_deg: float = 10.0
+    max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
+    max_image_down_normal: float = 0.5  # normal . image-down above this: the plane lies above the camera
+    min_camera_height_m: float = 0.02
+
+
+def _inlier_threshold_m(z_m: np.ndarray, params: CameraPoseParams) -> np.ndarray:
+    return params.inlier_base_m + params.inlier_quadratic_per_m * z_m * z_m
+
+
+def _fit_plane(points: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted least-squares plane (n, d) through points (N, 3), n oriented so that d >= 0."""
+    w = weights / weights.sum()
+    centroid = w @ points
+    centred = points - centroid
+    _, _, vt = np.linalg.svd((centred * np.sqrt(w)[:, None]).T @ (centred * np.sqrt(w)[:, None]))
+    n = vt[-1]
+    d = -float(n @ centroid)
+    return np.append(n, d) if d >= 0 else -np.append(n, d)
+
+
+def _ransac(points: np.ndarray, threshold_m: np.ndarray, rng: np.random.Generator, hypotheses: int):
+    """Best plane (4,) by inlier area over `hypotheses` random triples, evaluated together."""
+    triples = points[rng.integers(0, len(points), size=(hypotheses, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    norms = np.linalg.norm(normals, axis=1)
+    ok = norms > 1e-9
+    if not ok.any():
+        return None
+    normals = normals[ok] / norms[ok, None]
+    offsets = -np.einsum("hk,hk->h", normals, triples[ok, 0])
+    distances = np.abs(points @ normals.T + offsets)  # (N, H)
+    # each inlier counts with its depth^2, the area it covers facing the camera: near clutter
+    # (many pixels, little area) does not outvote the table
+    scores = (distances < threshold_m[:, None]).T @ (points[:, 2] ** 2)
+    best = int(np.argmax(scores))
+    return np.append(normals[best], offsets[best])
+
+
+def _refine(points: np.ndarray, threshold_m: np.ndarray, plane: np.ndarray, iterations: int = 3):
+    """Re-fit on inliers, weighting each point by 1 / threshold^2 (its depth noise); returns (plane, inliers)."""
+    inliers = np.abs(points @ plane[:3] + plane[3]) < threshold_m
+    for _ in range(iterations):
+        if inliers.sum() < 3:
+            break
+        plane = _fit_plane(points[inliers], 1.0 / threshold_m[inliers] ** 2)
+        inliers = np.abs(points @ plane[:3] + plane[3]) < threshold_m
+    return plane, inliers
+
+
+def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: float) -> float:
+    """Area of the plane covered by points (one subsampled pixel stands for `scale` pixels)."""
+    ranges = np.linalg.norm(points, axis=1)
+    cos = np.abs(points @ plane[:3]) / np.maximum(ranges, 1e-9)
+    return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.05)))
+
+
+def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
+    """Camera-frame points (N, 3) of a random subsample of the valid depth pixels."""
+    points = backproject(np.asarray(depth_m, dtype=np.float32), K, np.eye(4)).reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1)]
+    if len(points) > max_points:
+        points = points[rng.choice(len(points), max_points, replace=False)]
+    return points.astype(np.float64)
+
+
+def plane_problem(plane: np.ndarray, params: CameraPoseParams) -> str:
+    """Why a plane (n towards the camera, d) cannot be the support under the camera; '' if it can."""
+    n, d = plane[:3], plane[3]
+    if d < params.min_camera_height_m:
+        return f"plane passes {d * 100:.1f} cm from the camera (behind or through it)"
+    if n[1] > params.max_image_down_normal:
+        return "plane lies above the camera (its normal points down the image: a ceiling or an upside-down camera)"
+    if n[2] > np.sin(np.radians(params.max_look_up_deg)):
+        rise = np.degrees(np.arcsin(np.clip(n[2], -1, 1)))
+        return f"camera not looking down: its optical axis rises {rise:.0f} deg above the plane"
+    return ""
+
+
+def support_planes(points: np.ndarray, params: CameraPoseParams, rng: np.random.Generator) -> list:
+    """Sequential RANSAC: up to max_planes (plane, inlier count) pairs, largest first."""
+    threshold_m = _inlier_threshold_m(points[:, 2], params)
+    remaining = np.ones(len(points), bool)
+    min_inliers = max(3, int(params.min_inlier_fraction * len(points)))
+    planes = []
+    for _ in range(params.max_planes):
+        index = np.flatnonzero(remaining)
+        if len(index) < min_inliers:
+            break
+        plane = _ransac(points[index], threshold_m[index], rng, params.hypotheses)
+        if plane is None:
+            break
+        plane, inliers = _refine(points[index], threshold_m[index], plane)
+        if inliers.sum() < min_inliers:
+            break
+        # inliers over all points (a plane may take back points of an earlier, crossing plane)
+        all_inliers = np.abs(points @ plane[:3] + plane[3]) < threshold_m
+        planes.append((plane, all_inliers))
+        remaining[index[inliers]] = False
+    return planes
+
+
+def world_from_plane(plane: np.ndarray) -> np.ndarray:
+    """T_world_camera for a support plane (n towards the camera, d) in the camera frame (module docstring)."""
+    n, d = plane[:3] / np.linalg.norm(plane[:3]), float(plane[3])
+    axis = np.array([0.0, 0.0, 1.0])
+    if np.linalg.norm(axis - (axis @ n) * n) < np.sin(np.radians(1.0)):
+        axis = np.array([0.0, -1.0, 0.0])  # looking straight down: image up gives the yaw
+    x = axis - (axis @ n) * n
+    x /= np.linalg.norm(x)
+    R_world_camera = np.stack([x, np.cross(n, x), n])
+    T = np.eye(4)
+    T[:3, :3] = R_world_camera
+    T[:3, 3] = (0.0, 0.0, d)
+    return T
+
+
+def estimate_camera_pose(
+    depth_m: np.ndarray, K: np.ndarray, *, rng_seed: int = 0, params: CameraPoseParams | None = None
+) -> CameraPoseEstimate:
+    """The camera's pose over the dominant support plane of a depth image (metres, 0 = no return)
+    with intrinsics K. Raises CameraPoseError with the reason when there is no usable plane."""
+    params = params or CameraPoseParams()
+    depth_m = np.asarray(depth_m)
+    K = np.asarray(K, dtype=np.float64)
+    if depth_m.ndim != 2 or K.shape != (3, 3):
+        raise CameraPoseError(f"expected an HxW depth image and a 3x3 K, got {depth_m.shape} and {K.shape}")
+    rng = np.random.default_rng(rng_seed)
+    n_valid = int(np.count_nonzero(np.isfinite(depth_m) & (depth_m > 0)))
+    if n_valid < params.min_valid_pixels:
+        raise CameraPoseError(f"too few valid depth pixels: {n_valid} < {params.min_valid_pixels}")
+    points = valid_points(depth_m, K, params.max_points, rng)
+    planes = support_planes(points, params, rng)
+    if not planes:
+        raise CameraPoseError(
+            f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels"
+        )
+    usable = [(plane, inliers) for plane, inliers in planes if not plane_problem(plane, params)]
+    if not usable:
+        raise CameraPoseError(plane_problem(planes[0][0], params))
+    scale = n_valid / len(points)
+    fx_fy = K[0, 0] * K[1, 1]
+    areas = [_plane_area_m2(points[inliers], plane, fx_fy, scale) for plane, inliers in usable]
+    largest = int(np.argmax(areas))
+    cos_parallel = np.cos(np.radians(params.parallel_deg))
+    min_area = min(params.min_support_area_m2, 0.5 * areas[largest])
+    supports = [
+        i
+        for i, (plane, _) in enumerate(usable)
+        if plane[:3] @ usable[largest][0][:3] > cos_parallel and areas[i] >= min_area
+    ]
+    plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
+    return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())
+
+
+def plane_inlier_fraction(
+    depth_m: np.ndarray, K: np.ndarray, plane_camera: np.ndarray, *, rng_seed: int = 0, params: CameraPoseParams | None = None
+) -> float:
+    """Share of a subsample of the valid depth pixels within the inlier distance of a known plane:
+    a cheap check that an earlier estimate still holds for a new frame."""
+    params = params or CameraPoseParams()
+    points = valid_points(depth_m, K, params.max_points // 4, np.random.default_rng(rng_seed))
+    if len(points) == 0:
+        return 0.0
+    distances = np.abs(points @ plane_camera[:3] + plane_camera[3])
+    return float(np.mean(distances < _inlier_threshold_m(points[:, 2], params)))
