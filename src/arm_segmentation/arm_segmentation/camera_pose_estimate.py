@@ -3,8 +3,9 @@
 The camera is assumed to look down at a table. The support plane is found by sequential RANSAC
 (batched hypotheses, vectorized over points) on a random subsample of the valid depth pixels, each
 plane refined by weighted least squares on its inliers. The chosen support is the largest plane the
-camera looks down at; among the planes parallel to it that cover at least min_support_area_m2 (or
-half its area) the highest one, i.e. the nearest to the camera, wins: a table over a floor.
+camera looks down at; among the planes parallel to it, at least min_level_gap_m above it, that
+cover at least min_support_area_m2 (or half its area) the highest one, i.e. the nearest to the
+camera, wins: a table over a floor.
 
 World frame of the estimate (gravity-aligned, metres):
   z   the plane normal, pointing up (towards the camera); the table top is z = 0;
@@ -40,9 +41,11 @@ class CameraPoseParams:
     inlier_base_m: float = 0.004  # inlier distance at depth 0 ...
     inlier_quadratic_per_m: float = 0.004  # ... plus this times depth^2 (depth noise grows with distance^2)
     min_valid_pixels: int = 1000
-    min_inlier_fraction: float = 0.05  # smallest share of valid pixels a plane must hold
+    min_inlier_fraction: float = 0.05  # smallest share of valid pixels the largest plane must hold
+    min_plane_fraction: float = 0.01  # smallest share of valid pixels any further plane must hold
     min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table
-    parallel_deg: float = 10.0
+    parallel_deg: float = 5.0
+    min_level_gap_m: float = 0.1  # a higher parallel support must lie this much above the largest plane
     max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
     max_image_down_normal: float = 0.5  # normal . image-down above this: the plane lies above the camera
     min_camera_height_m: float = 0.02
@@ -96,7 +99,7 @@ def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: f
     """Area of the plane covered by points (one subsampled pixel stands for `scale` pixels)."""
     ranges = np.linalg.norm(points, axis=1)
     cos = np.abs(points @ plane[:3]) / np.maximum(ranges, 1e-9)
-    return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.05)))
+    return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.2)))
 
 
 def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
@@ -122,10 +125,10 @@ def plane_problem(plane: np.ndarray, params: CameraPoseParams) -> str:
 
 
 def support_planes(points: np.ndarray, params: CameraPoseParams, rng: np.random.Generator) -> list:
-    """Sequential RANSAC: up to max_planes (plane, inlier count) pairs, largest first."""
+    """Sequential RANSAC: up to max_planes (plane, inlier mask over points) pairs, in the order found."""
     threshold_m = _inlier_threshold_m(points[:, 2], params)
     remaining = np.ones(len(points), bool)
-    min_inliers = max(3, int(params.min_inlier_fraction * len(points)))
+    min_inliers = max(3, int(params.min_plane_fraction * len(points)))
     planes = []
     for _ in range(params.max_planes):
         index = np.flatnonzero(remaining)
@@ -175,7 +178,7 @@ def estimate_camera_pose(
         raise CameraPoseError(f"too few valid depth pixels: {n_valid} < {params.min_valid_pixels}")
     points = valid_points(depth_m, K, params.max_points, rng)
     planes = support_planes(points, params, rng)
-    if not planes:
+    if not planes or max(inliers.mean() for _, inliers in planes) < params.min_inlier_fraction:
         raise CameraPoseError(
             f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels"
         )
@@ -188,10 +191,13 @@ def estimate_camera_pose(
     largest = int(np.argmax(areas))
     cos_parallel = np.cos(np.radians(params.parallel_deg))
     min_area = min(params.min_support_area_m2, 0.5 * areas[largest])
-    supports = [
+    largest_plane = usable[largest][0]
+    supports = [largest] + [
         i
         for i, (plane, _) in enumerate(usable)
-        if plane[:3] @ usable[largest][0][:3] > cos_parallel and areas[i] >= min_area
+        if plane[:3] @ largest_plane[:3] > cos_parallel
+        and areas[i] >= min_area
+        and plane[3] < largest_plane[3] - params.min_level_gap_m
     ]
     plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
     return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())

@@ -1,0 +1,132 @@
+import numpy as np
+import pytest
+from seg_fixtures import Box, add_noise, intrinsics, look_at, render
+
+from arm_sim.camera import sample_camera_pose
+from arm_sim.depth_noise import DepthNoise
+from arm_sim.objects import object_pool
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
+from arm_segmentation.camera_pose_estimate import (
+    CameraPoseError,
+    estimate_camera_pose,
+    plane_inlier_fraction,
+    world_from_plane,
+)
+
+
+def gravity_error_deg(T_estimate, T_true):
+    """Angle between the estimated and the true world-up, both in the camera frame."""
+    return float(np.degrees(np.arccos(np.clip(T_estimate[2, :3] @ T_true[2, :3], -1.0, 1.0))))
+
+
+BOXES = [
+    Box((0.05, -0.1, 0.05), (0.05, 0.04, 0.05), 0.3, (200, 40, 40)),
+    Box((-0.05, 0.1, 0.08), (0.03, 0.03, 0.08), 0.0, (40, 170, 60)),
+    Box((0.15, 0.12, 0.03), (0.06, 0.06, 0.03), 0.8, (40, 60, 200)),
+]
+
+
+@pytest.mark.parametrize(
+    "eye, target",
+    [((-0.6, 0.2, 0.5), (0.0, 0.0, 0.0)), ((0.3, -0.4, 0.9), (0.05, 0.05, 0.0)), ((0.0, 0.01, 0.7), (0.0, 0.0, 0.0))],
+)
+def test_recovers_gravity_and_height_from_noisy_synthetic_depth(eye, target):
+    T_true = look_at(eye, target)
+    _, depth, _, K = render(BOXES, T_true)
+    depth = add_noise(depth, np.random.default_rng(1))
+    estimate = estimate_camera_pose(depth, K)
+    assert gravity_error_deg(estimate.T_world_camera, T_true) < 0.5
+    assert abs(estimate.T_world_camera[2, 3] - T_true[2, 3]) < 0.003
+    assert estimate.inlier_fraction > 0.5
+    n, d = estimate.plane_camera[:3], estimate.plane_camera[3]
+    assert np.isclose(np.linalg.norm(n), 1.0) and d > 0
+
+
+def test_world_frame_convention():
+    T_true = look_at((-0.6, 0.2, 0.5), (0.0, 0.0, 0.0))
+    _, depth, _, K = render([], T_true)
+    T = estimate_camera_pose(depth, K).T_world_camera
+    R = T[:3, :3]
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.isclose(np.linalg.det(R), 1.0)
+    assert np.allclose(T[:3, 3], [0.0, 0.0, 0.5], atol=1e-3)  # camera above the origin, table z = 0
+    optical_axis_world = R[:, 2]
+    assert optical_axis_world[0] > 0 and abs(optical_axis_world[1]) < 1e-9  # it looks along +x
+    assert optical_axis_world[2] < 0  # and down
+    # a table point seen by the camera lands on z = 0
+    v, u = 240, 320
+    p_camera = depth[v, u] * np.array([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], 1.0])
+    assert abs((R @ p_camera + T[:3, 3])[2]) < 1e-3
+
+
+def test_straight_down_view_takes_yaw_from_image_up():
+    T = world_from_plane(np.array([0.0, 0.0, -1.0, 0.8]))
+    assert np.allclose(T[:3, 3], [0, 0, 0.8])
+    assert np.allclose(T[:3, :3] @ [0.0, -1.0, 0.0], [1.0, 0.0, 0.0])  # image up along +x
+
+
+def test_picks_the_table_over_a_larger_floor():
+    # far and high: the floor 0.75 m below fills most of the image around a small table
+    T_true = look_at((-1.6, 0.0, 1.2), (0.0, 0.0, 0.0))
+    _, depth, _, K = render(BOXES, T_true, table_levels=((0.0, 0.3),))
+    depth = add_noise(depth, np.random.default_rng(2))
+    estimate = estimate_camera_pose(depth, K)
+    assert gravity_error_deg(estimate.T_world_camera, T_true) < 0.5
+    assert abs(estimate.T_world_camera[2, 3] - 1.2) < 0.005  # the table, not the floor (1.95 m)
+
+
+def test_too_few_valid_pixels():
+    _, depth, _, K = render([], look_at((-0.6, 0.2, 0.5), (0, 0, 0)))
+    depth[:, 2:] = 0.0  # 960 pixels left
+    with pytest.raises(CameraPoseError, match="too few valid depth pixels"):
+        estimate_camera_pose(depth, K)
+
+
+def test_no_plane_in_random_depth():
+    depth = np.random.default_rng(0).uniform(0.5, 3.0, (480, 640)).astype(np.float32)
+    with pytest.raises(CameraPoseError, match="no plane"):
+        estimate_camera_pose(depth, intrinsics())
+
+
+def test_plane_above_the_camera():
+    # under the floor looking up at it: a ceiling
+    _, depth, _, K = render([], look_at((-1.0, 0.0, -1.5), (0.0, 0.0, -1.2)), table_levels=())
+    with pytest.raises(CameraPoseError, match="above the camera"):
+        estimate_camera_pose(depth, K)
+
+
+def test_camera_looking_up_past_the_table():
+    K = intrinsics(640, 480, fovy_deg=120.0)
+    _, depth, _, _ = render([], look_at((-0.8, 0.0, 0.1), (0.0, 0.0, 0.9)), K=K, table_levels=((0.0, 3.0),))
+    with pytest.raises(CameraPoseError, match="not looking down"):
+        estimate_camera_pose(depth, K)
+
+
+def test_plane_inlier_fraction_tells_a_moved_camera():
+    T_true = look_at((-0.6, 0.2, 0.5), (0.0, 0.0, 0.0))
+    _, depth, _, K = render(BOXES, T_true)
+    estimate = estimate_camera_pose(depth, K)
+    assert plane_inlier_fraction(depth, K, estimate.plane_camera) == pytest.approx(estimate.inlier_fraction, abs=0.03)
+    _, moved, _, _ = render(BOXES, look_at((-0.6, 0.3, 0.6), (0.0, 0.0, 0.0)))
+    assert plane_inlier_fraction(moved, K, estimate.plane_camera) < 0.2
+
+
+@pytest.fixture(scope="module")
+def pool():
+    return object_pool()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", [0, 4, 8])
+def test_simulator_frames_at_benchmark_poses(pool, index):
+    rng = np.random.default_rng([0, index])
+    scene = cluttered_scene(pool, rng, n_objects=int(rng.integers(3, 11)))
+    world = SimWorld(scene, robot_arm=False)
+    try:
+        T_true = sample_camera_pose(rng, scene.table_centre)
+        frame = world.render(T_true, noise=DepthNoise(), rng=rng, with_visibility=False)
+    finally:
+        world.close()
+    estimate = estimate_camera_pose(frame.depth_m, frame.K)
+    assert gravity_error_deg(estimate.T_world_camera, T_true) < 1.0
+    assert abs(estimate.T_world_camera[2, 3] - (T_true[2, 3] - scene.table_height_m)) < 0.005
