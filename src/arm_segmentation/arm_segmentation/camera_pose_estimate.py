@@ -28,9 +28,14 @@ class CameraPoseError(ValueError):
 
 @dataclass
 class CameraPoseEstimate:
-    T_world_camera: np.ndarray  # 4x4 float64, optical frame in a gravity-aligned world: z up, table top z = 0, camera above it
-    inlier_fraction: float  # share of valid depth pixels on the plane
-    plane_camera: np.ndarray  # (4,) unit normal n (pointing towards the camera) and d, n.p + d = 0 in the camera frame, metres
+    """T_world_camera: 4x4 float64, the optical frame in a gravity-aligned world (z up, table top
+    z = 0, camera above it; see the module docstring). inlier_fraction: share of the valid depth
+    pixels on the plane. plane_camera: (4,) unit normal n (pointing towards the camera) and d,
+    n.p + d = 0 in the camera frame, metres (d is the camera's height above the plane)."""
+
+    T_world_camera: np.ndarray
+    inlier_fraction: float
+    plane_camera: np.ndarray
 
 
 @dataclass
@@ -204,7 +209,12 @@ def estimate_camera_pose(
 
 
 def plane_inlier_fraction(
-    depth_m: np.ndarray, K: np.ndarray, plane_camera: np.ndarray, *, rng_seed: int = 0, params: CameraPoseParams | None = None
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    plane_camera: np.ndarray,
+    *,
+    rng_seed: int = 0,
+    params: CameraPoseParams | None = None,
 ) -> float:
     """Share of a subsample of the valid depth pixels within the inlier distance of a known plane:
     a cheap check that an earlier estimate still holds for a new frame."""

@@ -1,6 +1,11 @@
 """segmentation_node: synchronizes RGB, depth, camera_info and camera pose (and, with
 use_ground_truth_masks, the simulator's label image), segments the latest complete frame and
-publishes arm_interfaces/SegmentedFrame plus a colourised overlay for viewers."""
+publishes arm_interfaces/SegmentedFrame plus a colourised overlay for viewers.
+
+With camera_pose_source:=estimate there is no camera/pose input: T_world_camera is estimated from
+each frame's depth (arm_segmentation.pose_tracking: the last estimate is reused while its table
+plane still fits), published on camera/pose/estimated, and a frame without a usable support plane
+is skipped with the reason in the log and in /diagnostics."""
 
 import time
 
@@ -11,13 +16,23 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
+from arm_ros.conversions import matrix_to_pose
+from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
-from arm_segmentation.frame_processing import FrameError, segment_messages
+from arm_segmentation.frame_processing import FrameError, decode_frame, segment_decoded
+from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
 from arm_segmentation.table_plane import TableParams
 
-INPUTS = ("rgb", "depth", "camera_info", "pose", "labels")
+TOPICS = {
+    "rgb": (Image, "camera/color/image_raw"),
+    "depth": (Image, "camera/depth/image_raw"),
+    "camera_info": (CameraInfo, "camera/camera_info"),
+    "pose": (PoseStamped, "camera/pose"),
+    "labels": (Image, "sim/ground_truth/labels"),
+}
+ESTIMATED_WORLD_FRAME = "world"
 
 
 def stamp_s(msg) -> float:
@@ -32,6 +47,13 @@ class SegmentationNode(Node):
         )
         slop_s = declare(self, "sync_tolerance_s", 0.02, "Largest stamp difference within one frame, seconds", 0.0, 1.0)
         queue = declare(self, "sync_queue_size", 5, "Messages kept per input while matching stamps", 1, 50)
+        pose_source = declare(
+            self,
+            "camera_pose_source",
+            "topic",
+            "T_world_camera from camera/pose (topic) or estimated from the depth's table plane (estimate)",
+            choices=["topic", "estimate"],
+        )
         reliability = declare(
             self,
             "image_reliability",
@@ -67,19 +89,16 @@ class SegmentationNode(Node):
             table=TableParams(min_table_area_m2=min_table, max_object_height_m=max_height),
             cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
         )
-        n_inputs = 5 if self.use_ground_truth else 4
-        self.sync = ApproximateTimeSynchronizer(n_inputs, slop_s, queue)
+        self.tracker = CameraPoseTracker() if pose_source == "estimate" else None
+        self.inputs = ["rgb", "depth", "camera_info"] + ([] if self.tracker else ["pose"])
+        self.inputs += ["labels"] if self.use_ground_truth else []
+        self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, queue)
         self.errors = RateLimitedErrors(self.get_logger())
         qos = sensor_qos(reliability, depth=1)
-        topics = [
-            (Image, "camera/color/image_raw"),
-            (Image, "camera/depth/image_raw"),
-            (CameraInfo, "camera/camera_info"),
-            (PoseStamped, "camera/pose"),
-            (Image, "sim/ground_truth/labels"),
-        ]
-        for index, (msg_type, topic) in enumerate(topics[:n_inputs]):
+        for index, name in enumerate(self.inputs):
+            msg_type, topic = TOPICS[name]
             self.create_subscription(msg_type, topic, lambda msg, i=index: self.on_message(i, msg), qos)
+        self.pub_estimated_pose = self.create_publisher(PoseStamped, "camera/pose/estimated", 10)
         self.pub_frame = self.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
         self.pub_overlay = self.create_publisher(Image, "arm/segmentation/overlay", qos)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
@@ -90,21 +109,38 @@ class SegmentationNode(Node):
         self.last_error = ""
         self.create_timer(1.0, self.publish_diagnostics)
         mode = "ground-truth masks" if self.use_ground_truth else "segmentation"
-        self.get_logger().info(f"segmentation_node ready ({mode}, sync tolerance {slop_s * 1e3:.0f} ms)")
+        self.get_logger().info(
+            f"segmentation_node ready ({mode}, camera pose from {pose_source}, sync tolerance {slop_s * 1e3:.0f} ms)"
+        )
 
     def on_message(self, index: int, msg) -> None:
         stamp = stamp_s(msg)
         if not (stamp == stamp and abs(stamp) < 1e12):
-            self.errors.error("bad_stamp", f"{INPUTS[index]} message has an invalid stamp")
+            self.errors.error("bad_stamp", f"{self.inputs[index]} message has an invalid stamp")
             return
         match = self.sync.add(index, stamp, msg)
         if match is not None:
-            self.process(*match[1])
+            self.process(**dict(zip(self.inputs, match[1], strict=True)))
 
-    def process(self, rgb, depth, info, pose, labels=None) -> None:
+    def estimated_pose(self, frame, depth) -> PoseStamped:
+        """Estimate (or reuse) T_world_camera for a decoded frame, publish it and fill the frame in."""
+        try:
+            estimate = self.tracker.update(frame.depth_m, frame.K)
+        except CameraPoseError as error:
+            raise FrameError(f"camera pose: {error}") from error
+        frame.T_world_camera, frame.world_frame_id = estimate.T_world_camera, ESTIMATED_WORLD_FRAME
+        pose = PoseStamped(pose=matrix_to_pose(estimate.T_world_camera))
+        pose.header.stamp, pose.header.frame_id = depth.header.stamp, ESTIMATED_WORLD_FRAME
+        self.pub_estimated_pose.publish(pose)
+        return pose
+
+    def process(self, rgb, depth, camera_info, pose=None, labels=None) -> None:
         start = time.perf_counter()
         try:
-            frame, overlay = segment_messages(rgb, depth, info, pose, labels, self.params)
+            decoded = decode_frame(rgb, depth, camera_info, pose)
+            if self.tracker is not None:
+                pose = self.estimated_pose(decoded, depth)
+            frame, overlay = segment_decoded(decoded, depth, camera_info, pose, labels, self.params)
         except FrameError as error:
             self.frames_rejected += 1
             self.last_error = str(error)
@@ -131,7 +167,33 @@ class SegmentationNode(Node):
             "last_instances": self.last_instances,
             "ground_truth_masks": self.use_ground_truth,
         }
-        self.pub_diag.publish(diagnostics_msg(self, "segmentation", values, level, message))
+        array = diagnostics_msg(self, "segmentation", values, level, message)
+        if self.tracker is not None:
+            array.status.append(self.pose_status())
+        self.pub_diag.publish(array)
+
+    def pose_status(self) -> DiagnosticStatus:
+        """ERROR with the reason while the last frame had no usable support plane, WARN when the plane
+        holds under a fifth of the valid depth pixels, else OK."""
+        stats, last = self.tracker.stats, self.tracker.last
+        inliers = last.inlier_fraction if last is not None else 0.0
+        if stats.last_error:
+            level, message = DiagnosticStatus.ERROR, f"no camera pose: {stats.last_error}"
+        elif last is None:
+            level, message = DiagnosticStatus.WARN, "no frame yet"
+        elif inliers < 0.2:
+            level, message = DiagnosticStatus.WARN, f"table plane holds only {inliers:.0%} of the depth pixels"
+        else:
+            level, message = DiagnosticStatus.OK, "ok"
+        values = {
+            "inlier_fraction": inliers,
+            "camera_height_m": float(last.T_world_camera[2, 3]) if last is not None else 0.0,
+            "estimates": stats.estimates,
+            "reused": stats.reuses,
+            "failures": stats.failures,
+            "last_error": stats.last_error,
+        }
+        return diagnostics_msg(self, "camera_pose_estimate", values, level, message).status[0]
 
 
 def main(args=None) -> int:

@@ -2,17 +2,17 @@ import numpy as np
 import pytest
 from seg_fixtures import Box, add_noise, intrinsics, look_at, render
 
-from arm_sim.camera import sample_camera_pose
-from arm_sim.depth_noise import DepthNoise
-from arm_sim.objects import object_pool
-from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SimWorld
 from arm_segmentation.camera_pose_estimate import (
     CameraPoseError,
     estimate_camera_pose,
     plane_inlier_fraction,
     world_from_plane,
 )
+from arm_sim.camera import sample_camera_pose
+from arm_sim.depth_noise import DepthNoise
+from arm_sim.objects import object_pool
+from arm_sim.scenes import cluttered_scene
+from arm_sim.world import SimWorld
 
 
 def gravity_error_deg(T_estimate, T_true):
