@@ -10,7 +10,7 @@ from arm_ros.common import use_private_domain
 use_private_domain()
 
 import rclpy  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from seg_fixtures import Box, add_noise, look_at, render  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
@@ -147,3 +147,55 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
     output = node.log()
     assert code == 0, output
     assert "rejected" in output
+
+
+@pytest.mark.slow
+def test_node_estimates_the_camera_pose_without_a_pose_topic(probe):
+    rgb, depth, gt, K = render(
+        [
+            Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
+            Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60)),
+        ],
+        CAMERA,
+    )
+    depth = add_noise(depth, np.random.default_rng(0))
+    node = start("camera_pose_source:=estimate", "image_reliability:=reliable")
+    got = {"frames": [], "poses": [], "diag": []}
+    probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
+    probe.create_subscription(PoseStamped, "camera/pose/estimated", got["poses"].append, 10)
+    probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
+    topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"), (CameraInfo, "camera/camera_info")]
+    publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics]
+
+    def pose_statuses():
+        return [s for d in got["diag"] for s in d.status if "camera_pose_estimate" in s.name]
+
+    def deliver(msgs, done, tries=3):
+        for _ in range(tries):
+            for p, m in zip(publishers, msgs, strict=True):
+                p.publish(m)
+                rclpy.spin_once(probe, timeout_sec=0.05)
+            if spin_until(probe, done, 3.0):
+                return True
+        return False
+
+    try:
+        assert spin_until(probe, lambda: all(p.get_subscription_count() > 0 for p in publishers), 30.0)
+        flat = np.random.default_rng(1).uniform(0.5, 3.0, depth.shape).astype(np.float32)  # no plane in it
+        no_plane = frame_messages(1.0, rgb, flat, K)[:3]
+        assert deliver(no_plane, lambda: any("no camera pose: no plane" in s.message for s in pose_statuses()))
+        assert pose_statuses()[-1].level == DiagnosticStatus.ERROR and got["frames"] == []
+
+        assert deliver(frame_messages(2.0, rgb, depth, K)[:3], lambda: got["frames"] and got["poses"])
+        frame, pose = got["frames"][0], got["poses"][0]
+        assert frame.world_frame_id == "world" and pose.header.frame_id == "world"
+        assert pose.header.stamp.sec == 2 and abs(pose.pose.position.z - CAMERA[2, 3]) < 0.005
+        assert frame.camera_pose == pose.pose
+        assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
+        assert spin_until(probe, lambda: pose_statuses() and pose_statuses()[-1].level == DiagnosticStatus.OK, 5.0)
+        values = {kv.key: kv.value for kv in pose_statuses()[-1].values}
+        assert float(values["inlier_fraction"]) > 0.5 and values["failures"] == "1"
+    finally:
+        code, output = stop(node)
+    assert code == 0, output
+    assert "camera pose: no plane" in output
