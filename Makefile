@@ -2,7 +2,7 @@ SHELL := /bin/bash
 ENV := source scripts/env.sh
 ARGS ?=
 
-.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness clean
+.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose clean
 
 setup:
 	@scripts/bootstrap.sh
@@ -30,6 +30,9 @@ bench-manip: setup
 
 bench-robustness: setup
 	@$(ENV) && bench_robustness $(ARGS)
+
+bench-camera-pose: setup
+	@$(ENV) && bench_camera_pose $(ARGS)
 
 clean:
 	rm -rf build install log

@@ -23,5 +23,6 @@ setup(
             "bench_recon = arm_benchmarks.bench_recon:main",
             "bench_manip = arm_benchmarks.bench_manip:main",
             "bench_robustness = arm_benchmarks.bench_robustness:main",
+            "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
     ]},
 )

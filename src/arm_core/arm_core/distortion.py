@@ -10,8 +10,9 @@ from collections import OrderedDict
 import cv2
 import numpy as np
 
-# CameraInfo.distortion_model -> number of coefficients in D
-MODELS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
+# CameraInfo.distortion_model -> accepted lengths of D (rational_polynomial with 12 or 14 is OpenCV's
+# extended model with thin-prism and tilt terms, as depthai publishes it)
+MODELS = {"plumb_bob": (4, 5), "rational_polynomial": (8, 12, 14), "equidistant": (4,)}
 
 
 class DistortionError(ValueError):
@@ -28,8 +29,9 @@ def is_distorted(model: str, D) -> bool:
         return False
     if model not in MODELS:
         raise DistortionError(f"distortion model '{model}' is not supported (one of {sorted(MODELS)})")
-    if len(D) != MODELS[model]:
-        raise DistortionError(f"{model} needs {MODELS[model]} coefficients, got {len(D)}")
+    if len(D) not in MODELS[model]:
+        allowed = " or ".join(str(n) for n in MODELS[model])
+        raise DistortionError(f"{model} needs {allowed} coefficients, got {len(D)}")
     return True
 
 

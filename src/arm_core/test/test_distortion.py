@@ -84,7 +84,8 @@ def test_zero_coefficients_are_used_as_is():
     [
         ("kannala_brandt_x", [0.1, 0.0, 0.0, 0.0], "not supported"),
         ("", [0.1, 0.0, 0.0, 0.0, 0.0], "not supported"),
-        ("plumb_bob", [0.1, 0.0, 0.0], "needs 5 coefficients"),
+        ("plumb_bob", [0.1, 0.0, 0.0], "needs 4 or 5 coefficients"),
+        ("rational_polynomial", [0.1] * 9, "needs 8 or 12 or 14 coefficients"),
         ("equidistant", [0.1, float("nan"), 0.0, 0.0], "not finite"),
     ],
 )
