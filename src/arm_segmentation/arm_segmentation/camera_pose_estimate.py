@@ -3,8 +3,8 @@
 The camera is assumed to look down at a table. The support plane is found by sequential RANSAC
 (batched hypotheses, vectorized over points) on a random subsample of the valid depth pixels, each
 plane refined by weighted least squares on its inliers. The chosen support is the largest plane the
-camera looks down at; among the planes parallel to it, at least min_level_gap_m above it, that
-cover at least min_support_area_m2 (or half its area) the highest one, i.e. the nearest to the
+camera looks down at; among the planes parallel to it that cover at least min_support_area_m2 (or
+half its area), one per level min_level_gap_m apart, the highest one, i.e. the nearest to the
 camera, wins: a table over a floor.
 
 World frame of the estimate (gravity-aligned, metres):
@@ -41,7 +41,8 @@ class CameraPoseEstimate:
 @dataclass
 class CameraPoseParams:
     max_points: int = 20000  # valid pixels subsampled for the search
-    hypotheses: int = 256  # RANSAC planes tried per search
+    hypotheses: int = 256  # RANSAC planes tried per search ...
+    scoring_points: int = 4000  # ... each scored on this many of the points (refinement uses all)
     max_planes: int = 5  # planes extracted one after the other
     inlier_base_m: float = 0.004  # inlier distance at depth 0 ...
     inlier_quadratic_per_m: float = 0.004  # ... plus this times depth^2 (depth noise grows with distance^2)
@@ -49,8 +50,8 @@ class CameraPoseParams:
     min_inlier_fraction: float = 0.05  # smallest share of valid pixels the largest plane must hold
     min_plane_fraction: float = 0.01  # smallest share of valid pixels any further plane must hold
     min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table
-    parallel_deg: float = 5.0
-    min_level_gap_m: float = 0.1  # a higher parallel support must lie this much above the largest plane
+    parallel_deg: float = 3.0
+    min_level_gap_m: float = 0.1  # parallel support levels lie at least this far apart
     max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
     max_image_down_normal: float = 0.5  # normal . image-down above this: the plane lies above the camera
     min_camera_height_m: float = 0.02
@@ -139,7 +140,8 @@ def support_planes(points: np.ndarray, params: CameraPoseParams, rng: np.random.
         index = np.flatnonzero(remaining)
         if len(index) < min_inliers:
             break
-        plane = _ransac(points[index], threshold_m[index], rng, params.hypotheses)
+        sample = index if len(index) <= params.scoring_points else rng.choice(index, params.scoring_points, False)
+        plane = _ransac(points[sample], threshold_m[sample], rng, params.hypotheses)
         if plane is None:
             break
         plane, inliers = _refine(points[index], threshold_m[index], plane)
@@ -148,7 +150,8 @@ def support_planes(points: np.ndarray, params: CameraPoseParams, rng: np.random.
         # inliers over all points (a plane may take back points of an earlier, crossing plane)
         all_inliers = np.abs(points @ plane[:3] + plane[3]) < threshold_m
         planes.append((plane, all_inliers))
-        remaining[index[inliers]] = False
+        # leave out the plane's noisy fringe too, or it comes back as a sliver plane next to it
+        remaining &= np.abs(points @ plane[:3] + plane[3]) >= 2.0 * threshold_m
     return planes
 
 
@@ -197,13 +200,15 @@ def estimate_camera_pose(
     cos_parallel = np.cos(np.radians(params.parallel_deg))
     min_area = min(params.min_support_area_m2, 0.5 * areas[largest])
     largest_plane = usable[largest][0]
-    supports = [largest] + [
-        i
-        for i, (plane, _) in enumerate(usable)
-        if plane[:3] @ largest_plane[:3] > cos_parallel
-        and areas[i] >= min_area
-        and plane[3] < largest_plane[3] - params.min_level_gap_m
-    ]
+    # support levels parallel to the largest plane, one per height: of planes closer than
+    # min_level_gap_m to each other (a sliver along the table's noisy fringe) the larger one stands
+    supports = []
+    for i in sorted(range(len(usable)), key=lambda i: -areas[i]):
+        plane = usable[i][0]
+        parallel = plane[:3] @ largest_plane[:3] > cos_parallel
+        apart = all(abs(plane[3] - usable[j][0][3]) >= params.min_level_gap_m for j in supports)
+        if i == largest or (parallel and areas[i] >= min_area and apart):
+            supports.append(i)
     plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
     return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())
 
