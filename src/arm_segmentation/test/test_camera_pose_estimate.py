@@ -8,6 +8,7 @@ from arm_segmentation.camera_pose_estimate import (
     plane_inlier_fraction,
     world_from_plane,
 )
+from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_sim.camera import sample_camera_pose
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
@@ -130,3 +131,20 @@ def test_simulator_frames_at_benchmark_poses(pool, index):
     estimate = estimate_camera_pose(frame.depth_m, frame.K)
     assert gravity_error_deg(estimate.T_world_camera, T_true) < 1.0
     assert abs(estimate.T_world_camera[2, 3] - (T_true[2, 3] - scene.table_height_m)) < 0.005
+
+
+def test_tracker_reuses_the_estimate_while_the_plane_fits():
+    _, depth, _, K = render(BOXES, look_at((-0.6, 0.2, 0.5), (0.0, 0.0, 0.0)))
+    tracker = CameraPoseTracker(max_reuse_frames=2)
+    first = tracker.update(depth, K)
+    assert tracker.update(depth, K) is first and tracker.update(depth, K) is first
+    assert tracker.stats.reuses == 2 and tracker.stats.last_reused
+    tracker.update(depth, K)  # at most max_reuse_frames in a row
+    assert tracker.stats.estimates == 2 and not tracker.stats.last_reused
+    T_moved = look_at((-0.6, 0.3, 0.6), (0.0, 0.0, 0.0))
+    _, moved, _, _ = render(BOXES, T_moved)
+    assert abs(tracker.update(moved, K).T_world_camera[2, 3] - 0.6) < 0.003
+    assert tracker.stats.estimates == 3
+    with pytest.raises(CameraPoseError, match="too few"):
+        tracker.update(np.zeros_like(depth), K)
+    assert tracker.last is None and tracker.stats.failures == 1 and "too few" in tracker.stats.last_error
