@@ -173,3 +173,27 @@ def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
         ReconstructionNode(
             context=ros_context, parameter_overrides=[Parameter("checkpoint_path", value=str(tmp_path / "x.pt"))]
         )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width, height", [(848, 480), (1280, 720)])
+def test_node_reconstructs_frames_of_real_camera_resolutions(checkpoint, ros_context, width, height):
+    rng = np.random.default_rng(5)
+    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=3)
+    world = SimWorld(scene, robot_arm=False, width=width, height=height)
+    centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
+    frame = world.render(look_at(centre + (0.5, 0.15, 0.4), centre), rng=rng)
+    world.close()
+    assert frame.depth_m.shape == (height, width)
+    msg = frame_to_msg(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, Header(frame_id="cam"))
+    node = ReconstructionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("checkpoint_path", value=str(checkpoint)), Parameter("threshold", value=0.05)],
+    )
+    try:
+        node.process(msg)
+        assert node.processed == 1 and node.rejected == 0
+        assert node._stage_values["objects"] == len(set(np.unique(frame.labels)) - {0})
+    finally:
+        node.close()
+        node.destroy_node()
