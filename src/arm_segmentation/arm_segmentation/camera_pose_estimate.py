@@ -4,8 +4,8 @@ The camera is assumed to look down at a table. The support plane is found by seq
 (batched hypotheses, vectorized over points) on a random subsample of the valid depth pixels, each
 plane refined by weighted least squares on its inliers. The chosen support is the largest plane the
 camera looks down at; among the planes parallel to it that cover at least min_support_area_m2 (or
-half its area), one per level min_level_gap_m apart, the highest one, i.e. the nearest to the
-camera, wins: a table over a floor.
+half its area) as a solid region of the image, one per level min_level_gap_m apart, the highest
+one, i.e. the nearest to the camera, wins: a table over a floor.
 
 World frame of the estimate (gravity-aligned, metres):
   z   the plane normal, pointing up (towards the camera); the table top is z = 0;
@@ -49,12 +49,15 @@ class CameraPoseParams:
     min_valid_pixels: int = 1000
     min_inlier_fraction: float = 0.05  # smallest share of valid pixels the largest plane must hold
     min_plane_fraction: float = 0.01  # smallest share of valid pixels any further plane must hold
-    min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table
+    min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table ...
+    min_dense_share: float = 0.5  # ... when this share of its inliers lie in image cells it dominates
+    grid_cells: tuple = (12, 16)  # rows, columns of those image cells
     parallel_deg: float = 3.0
     min_level_gap_m: float = 0.1  # parallel support levels lie at least this far apart
     max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
     max_image_down_normal: float = 0.5  # normal . image-down above this: the plane lies above the camera
     min_camera_height_m: float = 0.02
+    max_incidence_deg: float = 85.0  # points seen more obliquely than this do not vote for a plane
 
 
 def _inlier_threshold_m(z_m: np.ndarray, params: CameraPoseParams) -> np.ndarray:
@@ -72,22 +75,30 @@ def _fit_plane(points: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.append(n, d) if d >= 0 else -np.append(n, d)
 
 
-def _ransac(points: np.ndarray, threshold_m: np.ndarray, rng: np.random.Generator, hypotheses: int):
-    """Best plane (4,) by inlier area over `hypotheses` random triples, evaluated together."""
-    triples = points[rng.integers(0, len(points), size=(hypotheses, 3))]
+def _ransac(points: np.ndarray, threshold_m: np.ndarray, rng: np.random.Generator, params: CameraPoseParams):
+    """Best plane (4,) by inlier area over params.hypotheses random triples, evaluated together.
+    A point counts only where its ray meets the plane less obliquely than max_incidence_deg (a depth
+    camera gets no returns beyond): a plane through or near the camera would otherwise hold every
+    point near one image line whatever its depth, and outscore a narrow strip of table."""
+    triples = points[rng.integers(0, len(points), size=(params.hypotheses, 3))]
     normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
     norms = np.linalg.norm(normals, axis=1)
     ok = norms > 1e-9
-    if not ok.any():
-        return None
     normals = normals[ok] / norms[ok, None]
     offsets = -np.einsum("hk,hk->h", normals, triples[ok, 0])
+    away = np.abs(offsets) >= params.min_camera_height_m
+    if not away.any():
+        return None
+    normals, offsets = normals[away].astype(np.float32), offsets[away].astype(np.float32)
+    points = points.astype(np.float32)  # scoring only: float32 halves the (N, H) work
     distances = np.abs(points @ normals.T + offsets)  # (N, H)
+    # |offset| / range is the cosine of the incidence angle of a point on the plane
+    seen = np.abs(offsets) >= np.cos(np.radians(params.max_incidence_deg)) * np.linalg.norm(points, axis=1)[:, None]
     # each inlier counts with its depth^2, the area it covers facing the camera: near clutter
     # (many pixels, little area) does not outvote the table
-    scores = (distances < threshold_m[:, None]).T @ (points[:, 2] ** 2)
+    scores = ((distances < threshold_m[:, None]) & seen).T @ (points[:, 2] ** 2)
     best = int(np.argmax(scores))
-    return np.append(normals[best], offsets[best])
+    return np.append(normals[best], offsets[best]).astype(np.float64)
 
 
 def _refine(points: np.ndarray, threshold_m: np.ndarray, plane: np.ndarray, iterations: int = 3):
@@ -106,6 +117,22 @@ def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: f
     ranges = np.linalg.norm(points, axis=1)
     cos = np.abs(points @ plane[:3]) / np.maximum(ranges, 1e-9)
     return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.2)))
+
+
+def _dense_share(points: np.ndarray, inliers: np.ndarray, K: np.ndarray, shape, params: CameraPoseParams) -> float:
+    """Share of a plane's inliers lying in image cells where they are the majority of the points. A
+    real support covers a solid region; a plane grazing the tops and sides of clutter has its inliers
+    scattered among other surfaces."""
+    rows, cols = params.grid_cells
+    u = K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2]
+    v = K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2]
+    col = np.clip((u * cols / shape[1]).astype(np.int64), 0, cols - 1)
+    row = np.clip((v * rows / shape[0]).astype(np.int64), 0, rows - 1)
+    cell = row * cols + col
+    totals = np.bincount(cell, minlength=rows * cols)
+    on_plane = np.bincount(cell[inliers], minlength=rows * cols)
+    dominated = on_plane >= 0.5 * np.maximum(totals, 1)
+    return float(on_plane[dominated].sum() / max(on_plane.sum(), 1))
 
 
 def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
@@ -141,7 +168,7 @@ def support_planes(points: np.ndarray, params: CameraPoseParams, rng: np.random.
         if len(index) < min_inliers:
             break
         sample = index if len(index) <= params.scoring_points else rng.choice(index, params.scoring_points, False)
-        plane = _ransac(points[sample], threshold_m[sample], rng, params.hypotheses)
+        plane = _ransac(points[sample], threshold_m[sample], rng, params)
         if plane is None:
             break
         plane, inliers = _refine(points[index], threshold_m[index], plane)
@@ -207,7 +234,8 @@ def estimate_camera_pose(
         plane = usable[i][0]
         parallel = plane[:3] @ largest_plane[:3] > cos_parallel
         apart = all(abs(plane[3] - usable[j][0][3]) >= params.min_level_gap_m for j in supports)
-        if i == largest or (parallel and areas[i] >= min_area and apart):
+        dense = parallel and apart and _dense_share(points, usable[i][1], K, depth_m.shape, params)
+        if i == largest or (areas[i] >= min_area and dense >= params.min_dense_share):
             supports.append(i)
     plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
     return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())
