@@ -231,12 +231,15 @@ def estimate_camera_pose(
     # min_level_gap_m to each other (a sliver along the table's noisy fringe) the larger one stands
     supports = []
     for i in sorted(range(len(usable)), key=lambda i: -areas[i]):
-        plane = usable[i][0]
-        parallel = plane[:3] @ largest_plane[:3] > cos_parallel
-        apart = all(abs(plane[3] - usable[j][0][3]) >= params.min_level_gap_m for j in supports)
-        dense = parallel and apart and _dense_share(points, usable[i][1], K, depth_m.shape, params)
-        if i == largest or (areas[i] >= min_area and dense >= params.min_dense_share):
-            supports.append(i)
+        plane, inliers = usable[i]
+        if i != largest and not (
+            plane[:3] @ largest_plane[:3] > cos_parallel
+            and all(abs(plane[3] - usable[j][0][3]) >= params.min_level_gap_m for j in supports)
+            and areas[i] >= min_area
+            and _dense_share(points, inliers, K, depth_m.shape, params) >= params.min_dense_share
+        ):
+            continue
+        supports.append(i)
     plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
     return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())
 
