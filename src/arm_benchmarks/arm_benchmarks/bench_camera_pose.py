@@ -1,7 +1,7 @@
 """bench_camera_pose: T_world_camera estimated from depth alone (no calibrated camera pose).
 
 Seeded cluttered scenes (held-out objects, settled by physics) are rendered with the simulator's
-depth noise at camera poses sampled as in the paper's benchmark (arm_sim.camera.sample_camera_pose,
+depth noise at camera poses sampled as in the paper's benchmark (arm_sim.views.BenchmarkScene,
 several views per scene); arm_segmentation.camera_pose_estimate sees only the depth image and K.
 Per frame: the gravity error (angle between the estimated and the true world-up) and the table-height
 error (estimated camera height above the table minus the true one). A frame without an estimate
@@ -21,11 +21,8 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
-from arm_sim.camera import sample_camera_pose
-from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
-from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SimWorld
+from arm_sim.views import BenchmarkScene
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -72,17 +69,13 @@ def frame_errors(depth_m: np.ndarray, K: np.ndarray, T_true: np.ndarray, table_h
 
 def run_scene(index: int, args, pool) -> list[dict]:
     rng = np.random.default_rng([args.seed, index])
-    scene = cluttered_scene(pool, rng, n_objects=int(rng.integers(args.min_objects, args.max_objects + 1)))
-    world = SimWorld(scene, robot_arm=False)
+    objects = (args.min_objects, args.max_objects)
     rows = []
-    try:
+    with BenchmarkScene(pool, rng, objects, depth_noise=not args.no_noise, with_visibility=False) as views:
         for view in range(args.views_per_scene):
-            T_true = sample_camera_pose(rng, scene.table_centre)
-            frame = world.render(T_true, noise=DepthNoise(enabled=not args.no_noise), rng=rng, with_visibility=False)
-            errors = frame_errors(frame.depth_m, frame.K, T_true, scene.table_height_m)
-            rows.append({"scene": index, "view": view, "n_objects": len(scene.objects), **errors})
-    finally:
-        world.close()
+            frame = views.render()
+            errors = frame_errors(frame.depth_m, frame.K, frame.T_world_camera, views.scene.table_height_m)
+            rows.append({"scene": index, "view": view, "n_objects": len(views.scene.objects), **errors})
     return rows
 
 

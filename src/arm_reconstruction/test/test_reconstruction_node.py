@@ -185,7 +185,7 @@ def test_node_reconstructs_frames_of_real_camera_resolutions(checkpoint, ros_con
     frame = world.render(look_at(centre + (0.5, 0.15, 0.4), centre), rng=rng)
     world.close()
     assert frame.depth_m.shape == (height, width)
-    msg = frame_to_msg(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, Header(frame_id="cam"))
+    msg = frame_msg(frame)
     node = ReconstructionNode(
         context=ros_context,
         parameter_overrides=[Parameter("checkpoint_path", value=str(checkpoint)), Parameter("threshold", value=0.05)],

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_core.camera import backproject
+from arm_core.camera import backproject_image
 
 
 class CameraPoseError(ValueError):
@@ -137,8 +137,9 @@ def _dense_share(points: np.ndarray, inliers: np.ndarray, K: np.ndarray, shape, 
 
 def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
     """Camera-frame points (N, 3) of a random subsample of the valid depth pixels."""
-    points = backproject(np.asarray(depth_m, dtype=np.float32), K, np.eye(4)).reshape(-1, 3)
-    points = points[np.isfinite(points).all(axis=1)]
+    depth_m = np.asarray(depth_m, dtype=np.float32)
+    valid = (np.isfinite(depth_m) & (depth_m > 0)).ravel()
+    points = backproject_image(np.where(valid.reshape(depth_m.shape), depth_m, 0.0), K).reshape(-1, 3)[valid]
     if len(points) > max_points:
         points = points[rng.choice(len(points), max_points, replace=False)]
     return points.astype(np.float64)

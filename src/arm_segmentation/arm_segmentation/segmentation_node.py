@@ -16,10 +16,10 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
-from arm_ros.conversions import matrix_to_pose
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
-from arm_segmentation.frame_processing import FrameError, decode_frame, segment_decoded
+from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
 from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
@@ -137,10 +137,10 @@ class SegmentationNode(Node):
     def process(self, rgb, depth, camera_info, pose=None, labels=None) -> None:
         start = time.perf_counter()
         try:
-            decoded = decode_frame(rgb, depth, camera_info, pose)
+            decoded = decode_camera_frame(rgb, depth, camera_info, pose)
             if self.tracker is not None:
                 pose = self.estimated_pose(decoded, depth)
-            frame, overlay = segment_decoded(decoded, depth, camera_info, pose, labels, self.params)
+            frame, overlay = segment_frame(decoded, depth, camera_info, pose, labels, self.params)
         except FrameError as error:
             self.frames_rejected += 1
             self.last_error = str(error)

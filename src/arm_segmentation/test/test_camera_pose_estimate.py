@@ -9,11 +9,8 @@ from arm_segmentation.camera_pose_estimate import (
     world_from_plane,
 )
 from arm_segmentation.pose_tracking import CameraPoseTracker
-from arm_sim.camera import sample_camera_pose
-from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
-from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SimWorld
+from arm_sim.views import render_benchmark_view
 
 
 def gravity_error_deg(T_estimate, T_true):
@@ -120,14 +117,8 @@ def pool():
 @pytest.mark.slow
 @pytest.mark.parametrize("index", [0, 4, 8])
 def test_simulator_frames_at_benchmark_poses(pool, index):
-    rng = np.random.default_rng([0, index])
-    scene = cluttered_scene(pool, rng, n_objects=int(rng.integers(3, 11)))
-    world = SimWorld(scene, robot_arm=False)
-    try:
-        T_true = sample_camera_pose(rng, scene.table_centre)
-        frame = world.render(T_true, noise=DepthNoise(), rng=rng, with_visibility=False)
-    finally:
-        world.close()
+    scene, frame = render_benchmark_view(pool, np.random.default_rng([0, index]), (3, 10), with_visibility=False)
+    T_true = frame.T_world_camera
     estimate = estimate_camera_pose(frame.depth_m, frame.K)
     assert gravity_error_deg(estimate.T_world_camera, T_true) < 1.0
     assert abs(estimate.T_world_camera[2, 3] - (T_true[2, 3] - scene.table_height_m)) < 0.005

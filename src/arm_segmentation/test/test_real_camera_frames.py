@@ -8,9 +8,10 @@ from geometry_msgs.msg import PoseStamped
 from seg_fixtures import Box, add_noise, look_at, render
 from std_msgs.msg import Header
 
-from arm_ros.conversions import camera_info_from_K, image_to_numpy, matrix_to_pose, numpy_to_image
+from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image
+from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.camera_pose_estimate import estimate_camera_pose
-from arm_segmentation.frame_processing import FrameError, decode_frame, segment_decoded, segment_messages
+from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame, segment_messages
 from arm_segmentation.metrics import segmentation_metrics
 
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
@@ -58,7 +59,7 @@ def test_segments_driver_resolutions(width, height):
 @pytest.mark.parametrize("colour", ["bgra8", "rgba8", "bgr8"])
 def test_four_channel_and_bgr_colour_is_converted(colour):
     rgb, depth, _, K = render(BOXES, CAMERA, width=160, height=120)
-    frame = decode_frame(*messages(rgb, depth, K, colour))
+    frame = decode_camera_frame(*messages(rgb, depth, K, colour))
     assert np.array_equal(frame.rgb, rgb)
 
 
@@ -79,7 +80,7 @@ def test_distorted_frame_is_undistorted_before_segmenting():
     rgb_d, depth_d = distort_frame(rgb, depth, K, PLUMB_BOB)
     assert np.mean(np.abs(depth_d - depth) > 0.01) > 0.02  # the distortion moves depth edges
     msgs = messages(rgb_d, depth_d, K, distortion=("plumb_bob", PLUMB_BOB))
-    decoded = decode_frame(*msgs)
+    decoded = decode_camera_frame(*msgs)
     inner = (slice(40, -40), slice(40, -40))
     agree = np.abs(decoded.depth_m[inner] - np.round(depth[inner] * 1000) / 1000) < 0.005
     assert agree.mean() > 0.98
@@ -91,16 +92,16 @@ def test_distorted_frame_is_undistorted_before_segmenting():
 def test_unknown_distortion_model_is_refused():
     rgb, depth, _, K = render(BOXES, CAMERA, width=160, height=120)
     with pytest.raises(FrameError, match="distortion model 'fisheye62' is not supported"):
-        decode_frame(*messages(rgb, depth, K, distortion=("fisheye62", [0.1, 0.0, 0.0, 0.0, 0.0, 0.0])))
+        decode_camera_frame(*messages(rgb, depth, K, distortion=("fisheye62", [0.1, 0.0, 0.0, 0.0, 0.0, 0.0])))
 
 
 def test_frame_without_pose_segments_with_the_estimated_pose():
     rgb, depth, gt, K = render(BOXES, CAMERA)
     rgb_msg, depth_msg, info, _ = messages(rgb, add_noise(depth, np.random.default_rng(3)), K)
-    decoded = decode_frame(rgb_msg, depth_msg, info)
+    decoded = decode_camera_frame(rgb_msg, depth_msg, info)
     assert decoded.T_world_camera is None
     decoded.T_world_camera = estimate_camera_pose(decoded.depth_m, decoded.K).T_world_camera
     pose = PoseStamped(pose=matrix_to_pose(decoded.T_world_camera))
-    frame, _ = segment_decoded(decoded, depth_msg, info, pose)
+    frame, _ = segment_frame(decoded, depth_msg, info, pose)
     assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
 
