@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
+from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 from arm_sim.views import BenchmarkScene
 
@@ -40,6 +41,9 @@ def parse_args(argv=None):
     parser.add_argument("--min-objects", type=int, default=3)
     parser.add_argument("--max-objects", type=int, default=20)
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
+    parser.add_argument(
+        "--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the rendered scenes"
+    )
     parser.add_argument("--out", default=None, help="output folder (default results/camera_pose[_seedN])")
     args = parser.parse_args(argv)
     if args.frames < 1 or args.views_per_scene < 1 or not 1 <= args.min_objects <= args.max_objects:
@@ -71,7 +75,8 @@ def run_scene(index: int, args, pool) -> list[dict]:
     rng = np.random.default_rng([args.seed, index])
     objects = (args.min_objects, args.max_objects)
     rows = []
-    with BenchmarkScene(pool, rng, objects, depth_noise=not args.no_noise, with_visibility=False) as views:
+    options = {"depth_noise": not args.no_noise, "with_visibility": False, "domain": args.domain}
+    with BenchmarkScene(pool, rng, objects, **options) as views:
         for view in range(args.views_per_scene):
             frame = views.render()
             errors = frame_errors(frame.depth_m, frame.K, frame.T_world_camera, views.scene.table_height_m)
@@ -107,6 +112,7 @@ def summarize(rows: list[dict], args) -> dict:
         "views_per_scene": args.views_per_scene,
         "objects_per_scene": [args.min_objects, args.max_objects],
         "depth_noise": not args.no_noise,
+        "domain": args.domain,
         "machine": f"{platform.machine()} {platform.processor() or 'cpu'}, python {platform.python_version()}",
         "cpu_count": os.cpu_count(),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),

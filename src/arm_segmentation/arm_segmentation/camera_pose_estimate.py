@@ -1,11 +1,13 @@
 """T_world_camera from one depth image, for cameras without a calibrated camera-to-table transform.
 
-The camera is assumed to look down at a table. The support plane is found by sequential RANSAC
-(batched hypotheses, vectorized over points) on a random subsample of the valid depth pixels, each
-plane refined by weighted least squares on its inliers. The chosen support is the largest plane the
-camera looks down at; among the planes parallel to it that cover at least min_support_area_m2 (or
-half its area) as a solid region of the image, one per level min_level_gap_m apart, the highest
-one, i.e. the nearest to the camera, wins: a table over a floor.
+The camera is assumed to look down at a table at most max_camera_height_m below it, rolled at most
+max_roll_deg about its optical axis.
+The support plane is found by sequential RANSAC (batched hypotheses, vectorized over points) on a
+random subsample of the valid depth pixels, each plane refined by weighted least squares on its
+inliers. The chosen support is the largest plane that can lie under the camera (walls and ceilings
+cannot, see plane_problem); among the planes parallel to it that cover at least
+min_support_area_m2 (or half its area) as a solid region of the image, one per level
+min_level_gap_m apart, the highest one, i.e. the nearest to the camera, wins: a table over a floor.
 
 World frame of the estimate (gravity-aligned, metres):
   z   the plane normal, pointing up (towards the camera); the table top is z = 0;
@@ -55,8 +57,10 @@ class CameraPoseParams:
     parallel_deg: float = 3.0
     min_level_gap_m: float = 0.1  # parallel support levels lie at least this far apart
     max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
-    max_image_down_normal: float = 0.5  # normal . image-down above this: the plane lies above the camera
+    max_roll_deg: float = 45.0  # largest camera roll about the optical axis for a plane to be the table ...
+    straight_down_deg: float = 20.0  # ... unless the camera looks within this of straight down at it
     min_camera_height_m: float = 0.02
+    max_camera_height_m: float = 2.0  # farther planes are walls or a floor far below, not the table
     max_incidence_deg: float = 85.0  # points seen more obliquely than this do not vote for a plane
 
 
@@ -146,12 +150,20 @@ def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.ra
 
 
 def plane_problem(plane: np.ndarray, params: CameraPoseParams) -> str:
-    """Why a plane (n towards the camera, d) cannot be the support under the camera; '' if it can."""
+    """Why a plane (n towards the camera, d) cannot be the support under the camera; '' if it can.
+    Taken as the table, the plane's normal is world-up seen from the camera: its direction in the
+    image gives the camera's roll (0 when up is image-up), its depth component the pitch."""
     n, d = plane[:3], plane[3]
     if d < params.min_camera_height_m:
         return f"plane passes {d * 100:.1f} cm from the camera (behind or through it)"
-    if n[1] > params.max_image_down_normal:
-        return "plane lies above the camera (its normal points down the image: a ceiling or an upside-down camera)"
+    if d > params.max_camera_height_m:
+        return f"plane lies {d:.2f} m from the camera, farther than {params.max_camera_height_m} m (a wall?)"
+    if np.hypot(n[0], n[1]) > np.sin(np.radians(params.straight_down_deg)):  # else roll is undefined
+        roll = np.degrees(np.arctan2(n[0], -n[1]))
+        if abs(roll) > 135.0:
+            return "plane lies above the camera (its normal points down the image: a ceiling or an upside-down camera)"
+        if abs(roll) > params.max_roll_deg:
+            return f"plane stands upright in the image (a wall?): the camera would be rolled {roll:.0f} deg"
     if n[2] > np.sin(np.radians(params.max_look_up_deg)):
         rise = np.degrees(np.arcsin(np.clip(n[2], -1, 1)))
         return f"camera not looking down: its optical axis rises {rise:.0f} deg above the plane"
