@@ -4,8 +4,10 @@ from seg_fixtures import Box, add_noise, intrinsics, look_at, render
 
 from arm_segmentation.camera_pose_estimate import (
     CameraPoseError,
+    CameraPoseParams,
     estimate_camera_pose,
     plane_inlier_fraction,
+    plane_problem,
     world_from_plane,
 )
 from arm_segmentation.pose_tracking import CameraPoseTracker
@@ -139,3 +141,22 @@ def test_tracker_reuses_the_estimate_while_the_plane_fits():
     with pytest.raises(CameraPoseError, match="too few"):
         tracker.update(np.zeros_like(depth), K)
     assert tracker.last is None and tracker.stats.failures == 1 and "too few" in tracker.stats.last_error
+
+
+@pytest.mark.parametrize(
+    "plane, reason",
+    [
+        ((0.0, -0.8, -0.6, 0.5), ""),  # a table seen from 0.5 m, camera pitched down 37 deg
+        ((0.1, -0.05, -0.99, 0.8), ""),  # straight down: any roll
+        ((0.0, -0.8, -0.6, 0.01), "passes 1.0 cm from the camera"),
+        ((0.0, -0.8, -0.6, 3.0), "farther than 2.0 m"),
+        ((0.9, 0.1, -0.42, 1.0), "upright in the image"),  # a side wall
+        ((0.0, 0.9, -0.44, 1.0), "above the camera"),  # a ceiling
+        ((0.0, -0.8, 0.6, 0.5), "not looking down"),
+    ],
+)
+def test_plane_problem_reasons(plane, reason):
+    plane = np.array(plane)
+    plane[:3] /= np.linalg.norm(plane[:3])
+    problem = plane_problem(plane, CameraPoseParams())
+    assert (reason in problem) if reason else problem == ""
