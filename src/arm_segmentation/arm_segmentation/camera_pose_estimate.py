@@ -4,10 +4,11 @@ The camera is assumed to look down at a table at most max_camera_height_m below 
 max_roll_deg about its optical axis.
 The support plane is found by sequential RANSAC (batched hypotheses, vectorized over points) on a
 random subsample of the valid depth pixels, each plane refined by weighted least squares on its
-inliers. The chosen support is the largest plane that can lie under the camera (walls and ceilings
-cannot, see plane_problem); among the planes parallel to it that cover at least
-min_support_area_m2 (or half its area) as a solid region of the image, one per level
-min_level_gap_m apart, the highest one, i.e. the nearest to the camera, wins: a table over a floor.
+inliers. Candidates are planes that can lie under the camera (walls and ceilings cannot, see
+plane_problem) and cover a solid region of the image (not the tops of clutter). The largest by area
+and the planes parallel to it covering at least min_support_area_m2 (or half its area), one per
+level min_level_gap_m apart, are the support levels; the one the camera looks at wins (seen nearest
+the image centre), so a table over the floor around it and the work table over a second one behind.
 
 World frame of the estimate (gravity-aligned, metres):
   z   the plane normal, pointing up (towards the camera); the table top is z = 0;
@@ -54,6 +55,7 @@ class CameraPoseParams:
     min_support_area_m2: float = 0.08  # a parallel plane this large (or half the largest) may be the table ...
     min_dense_share: float = 0.5  # ... when this share of its inliers lie in image cells it dominates
     grid_cells: tuple = (12, 16)  # rows, columns of those image cells
+    centre_rank: int = 10  # the support level whose this-many-th inlier lies nearest the image centre wins
     parallel_deg: float = 3.0
     min_level_gap_m: float = 0.1  # parallel support levels lie at least this far apart
     max_look_up_deg: float = 30.0  # the optical axis may rise at most this much above the plane
@@ -123,13 +125,16 @@ def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: f
     return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.2)))
 
 
-def _dense_share(points: np.ndarray, inliers: np.ndarray, K: np.ndarray, shape, params: CameraPoseParams) -> float:
+def _pixels(points: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image coordinates (u, v) of camera-frame points."""
+    return K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2], K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2]
+
+
+def _dense_share(u: np.ndarray, v: np.ndarray, inliers: np.ndarray, shape, params: CameraPoseParams) -> float:
     """Share of a plane's inliers lying in image cells where they are the majority of the points. A
     real support covers a solid region; a plane grazing the tops and sides of clutter has its inliers
     scattered among other surfaces."""
     rows, cols = params.grid_cells
-    u = K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2]
-    v = K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2]
     col = np.clip((u * cols / shape[1]).astype(np.int64), 0, cols - 1)
     row = np.clip((v * rows / shape[0]).astype(np.int64), 0, rows - 1)
     cell = row * cols + col
@@ -230,9 +235,15 @@ def estimate_camera_pose(
         raise CameraPoseError(
             f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels"
         )
-    usable = [(plane, inliers) for plane, inliers in planes if not plane_problem(plane, params)]
+    u, v = _pixels(points, K)
+    problems = [plane_problem(plane, params) for plane, _ in planes]
+    usable = [
+        (plane, inliers)
+        for (plane, inliers), problem in zip(planes, problems, strict=True)
+        if not problem and _dense_share(u, v, inliers, depth_m.shape, params) >= params.min_dense_share
+    ]
     if not usable:
-        raise CameraPoseError(plane_problem(planes[0][0], params))
+        raise CameraPoseError(next((p for p in problems if p), "no plane covers a solid region of the image"))
     scale = n_valid / len(points)
     fx_fy = K[0, 0] * K[1, 1]
     areas = [_plane_area_m2(points[inliers], plane, fx_fy, scale) for plane, inliers in usable]
@@ -244,16 +255,25 @@ def estimate_camera_pose(
     # min_level_gap_m to each other (a sliver along the table's noisy fringe) the larger one stands
     supports = []
     for i in sorted(range(len(usable)), key=lambda i: -areas[i]):
-        plane, inliers = usable[i]
+        plane = usable[i][0]
         if i != largest and not (
             plane[:3] @ largest_plane[:3] > cos_parallel
             and all(abs(plane[3] - usable[j][0][3]) >= params.min_level_gap_m for j in supports)
             and areas[i] >= min_area
-            and _dense_share(points, inliers, K, depth_m.shape, params) >= params.min_dense_share
         ):
             continue
         supports.append(i)
-    plane, inliers = usable[min(supports, key=lambda i: usable[i][0][3])]
+    # the level the camera looks at: the one seen nearest the image centre (its 10th nearest
+    # inlier, robust to stray points), so a table over the floor around it and the work table over
+    # a second one behind; the objects on a table hide at most part of it around the centre
+    h, w = depth_m.shape
+    from_centre_px = np.hypot(u - 0.5 * w, v - 0.5 * h)
+
+    def centre_distance_px(i: int) -> float:
+        near = np.sort(from_centre_px[usable[i][1]])
+        return float(near[min(len(near) - 1, params.centre_rank)])
+
+    plane, inliers = usable[min(supports, key=lambda i: (centre_distance_px(i), usable[i][0][3]))]
     return CameraPoseEstimate(world_from_plane(plane), float(inliers.mean()), plane.copy())
 
 
