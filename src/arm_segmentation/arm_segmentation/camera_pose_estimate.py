@@ -166,7 +166,7 @@ def plane_problem(plane: np.ndarray, params: CameraPoseParams) -> str:
     if np.hypot(n[0], n[1]) > np.sin(np.radians(params.straight_down_deg)):  # else roll is undefined
         roll = np.degrees(np.arctan2(n[0], -n[1]))
         if abs(roll) > 135.0:
-            return "plane lies above the camera (its normal points down the image: a ceiling or an upside-down camera)"
+            return "plane faces down the image (a ceiling or a front face above the camera, or an upside-down camera)"
         if abs(roll) > params.max_roll_deg:
             return f"plane stands upright in the image (a wall?): the camera would be rolled {roll:.0f} deg"
     if n[2] > np.sin(np.radians(params.max_look_up_deg)):

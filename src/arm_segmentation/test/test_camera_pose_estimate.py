@@ -91,7 +91,7 @@ def test_no_plane_in_random_depth():
 def test_plane_above_the_camera():
     # under the floor looking up at it: a ceiling
     _, depth, _, K = render([], look_at((-1.0, 0.0, -1.5), (0.0, 0.0, -1.2)), table_levels=())
-    with pytest.raises(CameraPoseError, match="above the camera"):
+    with pytest.raises(CameraPoseError, match="faces down the image"):
         estimate_camera_pose(depth, K)
 
 
@@ -151,7 +151,7 @@ def test_tracker_reuses_the_estimate_while_the_plane_fits():
         ((0.0, -0.8, -0.6, 0.01), "passes 1.0 cm from the camera"),
         ((0.0, -0.8, -0.6, 3.0), "farther than 2.0 m"),
         ((0.9, 0.1, -0.42, 1.0), "upright in the image"),  # a side wall
-        ((0.0, 0.9, -0.44, 1.0), "above the camera"),  # a ceiling
+        ((0.0, 0.9, -0.44, 1.0), "faces down the image"),  # a ceiling
         ((0.0, -0.8, 0.6, 0.5), "not looking down"),
     ],
 )
@@ -160,3 +160,13 @@ def test_plane_problem_reasons(plane, reason):
     plane[:3] /= np.linalg.norm(plane[:3])
     problem = plane_problem(plane, CameraPoseParams())
     assert (reason in problem) if reason else problem == ""
+
+
+def test_picks_the_table_it_looks_at_over_a_higher_one_behind():
+    T_true = look_at((-0.9, 0.0, 0.6), (0.1, 0.0, 0.0))
+    second_table = Box((1.1, 0.0, 0.075), (0.45, 0.6, 0.075))  # its top 15 cm above the work table
+    _, depth, _, K = render(BOXES, T_true, supports=[second_table])
+    depth = add_noise(depth, np.random.default_rng(4))
+    estimate = estimate_camera_pose(depth, K)
+    assert gravity_error_deg(estimate.T_world_camera, T_true) < 0.5
+    assert abs(estimate.T_world_camera[2, 3] - 0.6) < 0.005
