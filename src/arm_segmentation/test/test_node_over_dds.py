@@ -150,7 +150,7 @@ def test_node_segments_synchronized_frames_and_survives_bad_ones(probe, ground_t
 
 
 @pytest.mark.slow
-def test_node_estimates_the_camera_pose_without_a_pose_topic(probe):
+def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
     rgb, depth, gt, K = render(
         [
             Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
@@ -159,7 +159,11 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe):
         CAMERA,
     )
     depth = add_noise(depth, np.random.default_rng(0))
-    node = start("camera_pose_source:=estimate", "image_reliability:=reliable")
+    node = NodeProcess(
+        "segmentation",
+        tmp_path / "segmentation.log",
+        params={"camera_pose_source": "estimate", "image_reliability": "reliable"},
+    )
     got = {"frames": [], "poses": [], "diag": []}
     probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
     probe.create_subscription(PoseStamped, "camera/pose/estimated", got["poses"].append, 10)
@@ -196,6 +200,7 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe):
         values = {kv.key: kv.value for kv in pose_statuses()[-1].values}
         assert float(values["inlier_fraction"]) > 0.5 and values["failures"] == "1"
     finally:
-        code, output = stop(node)
+        code = node.stop(timeout_s=10.0)
+    output = node.log()
     assert code == 0, output
     assert "camera pose: no plane" in output
