@@ -31,7 +31,7 @@ fi
 
 export AMENT_PREFIX_PATH="$ROOT/.venv" CMAKE_PREFIX_PATH="$ROOT/.venv"
 export PATH="$ROOT/.venv/bin:$PATH"
-src_hash=$(find src colcon.meta -type f \( -name '*.msg' -o -name '*.action' -o -name '*.txt' -o -name '*.xml' -o -name 'setup.py' -o -name 'setup.cfg' -o -name 'colcon.meta' \) -print0 | sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)
+src_hash=$(find src colcon.meta -type f \( -name '*.msg' -o -name '*.action' -o -name '*.txt' -o -name '*.xml' -o -name 'setup.py' -o -name 'setup.cfg' -o -name 'colcon.meta' -o -name '*.yaml' -o -name '*.launch.py' \) -print0 | sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)
 if [ "$(cat install/.src.sha 2>/dev/null)" != "$src_hash" ] || [ ! -f install/setup.bash ]; then
   echo "[bootstrap] colcon build"
   colcon --log-base log build --base-paths src --symlink-install --metas colcon.meta \
