@@ -43,6 +43,10 @@ class ClusterParams:
     flood_strict_chroma_threshold: float = 0.25  # first flood pass: fragments claim their own colour (0: off)
     grow_radius_px: int = 3
     grow_chroma_threshold: float = 0.12
+    geometric_merge: bool = True  # fragments meeting on one smooth surface merge whatever their colour
+    geometric_min_contact_px: int = 6
+    geometric_contact_share: float = 0.5  # of all their contacts
+    geometric_edge_px: int = 1  # pixels this near a depth jump or concave crease are no smooth contact
     max_instances: int = 255
     agglomerative: bool = True  # region merging most similar first (False: one pass over all pairs)
 
@@ -86,14 +90,16 @@ def _shifted(axis_shift):
     return (h_a, w_a), (h_b, w_b)
 
 
-def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, normal_valid, params) -> np.ndarray:
-    """HxW bool: pixels of `mask` that lie on a boundary between two different surfaces.
+def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, normal_valid, params):
+    """(edge, geometric) HxW bool: pixels of `mask` that lie on a boundary between two different
+    surfaces, and those of them found by geometry alone.
 
     Depth jumps are tested where both pixels have depth, creases where both have normals, colour
     everywhere (pixels without depth still have colour).
     """
     s = params.step_px
     edge = np.zeros(mask.shape, dtype=bool)
+    geometric = np.zeros(mask.shape, dtype=bool)
     for shift in ((0, s), (s, 0)):
         a, b = _shifted(shift)
         za, zb = depth_m[a], depth_m[b]
@@ -102,12 +108,14 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
         dn = normals_camera[a] - normals_camera[b]
         convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
         cut |= (convexity < -params.concave_threshold) & normal_valid[a] & normal_valid[b]
+        geometric[a] |= cut & mask[a] & mask[b]
+        geometric[b] |= cut & mask[a] & mask[b]
         if chroma is not None:
             cut |= np.abs(chroma[a] - chroma[b]).sum(axis=-1) > params.chroma_edge_threshold
         cut &= mask[a] & mask[b]
         edge[a] |= cut
         edge[b] |= cut
-    return edge
+    return edge, geometric
 
 
 def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:
@@ -119,13 +127,14 @@ def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:
     )
 
 
-def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams):
+def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams, smooth=None):
     """Pixel contacts between different fragments within contact_radius_px of each other.
 
-    Returns (pairs (P, 2) int64 with a < b, counts (P, 3)): contacts at a continuous depth, across a
-    depth discontinuity, and where a pixel has no depth.
+    Returns (pairs (P, 2) int64 with a < b, counts (P, 4)): contacts at a continuous depth, across a
+    depth discontinuity, where a pixel has no depth, and (a subset of the first) continuous
+    contacts between two pixels of the HxW bool `smooth` (zero when it is None).
     """
-    keys, kinds = [], []
+    keys, kinds, smooth_kinds = [], [], []
     r = params.contact_radius_px
     shifts = [(0, k) for k in range(1, r + 1)] + [(k, 0) for k in range(1, r + 1)]
     shifts += [(k, k) for k in range(1, r)] + [(k, -k) for k in range(1, r)]
@@ -138,15 +147,19 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
         unknown = (za <= 0) | (zb <= 0)
         continuous = ~unknown & (np.abs(za - zb) <= depth_jump_limit(np.minimum(za, zb), np.hypot(*shift) + 1, params))
         kinds.append(np.where(unknown, 2, np.where(continuous, 0, 1)))
+        if smooth is not None:
+            smooth_kinds.append(continuous & smooth[a][touching] & smooth[b][touching])
         lo = np.minimum(la[touching], lb[touching]).astype(np.int64)
         hi = np.maximum(la[touching], lb[touching]).astype(np.int64)
         keys.append(lo * big + hi)
     keys = np.concatenate(keys)
     kinds = np.concatenate(kinds)
     unique, inverse = np.unique(keys, return_inverse=True)
-    counts = np.zeros((len(unique), 3), dtype=np.int64)
+    counts = np.zeros((len(unique), 4), dtype=np.int64)
     for kind in range(3):
         counts[:, kind] = np.bincount(inverse[kinds == kind], minlength=len(unique))
+    if smooth is not None:
+        counts[:, 3] = np.bincount(inverse[np.concatenate(smooth_kinds)], minlength=len(unique))
     return np.stack([unique // big, unique % big], axis=1), counts
 
 
@@ -229,10 +242,27 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
     return owner
 
 
-def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams) -> np.ndarray:
-    """Merge fragments into objects (see the module docstring). Returns labels (0 = none)."""
+def merge_geometric(labels, n, depth_m, smooth, params: ClusterParams) -> np.ndarray:
+    """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
+    both sides above their support): the parts of one printed object, whatever their colours."""
+    pairs, counts = fragment_contacts(labels, depth_m, params, smooth)
+    if not len(pairs):
+        return labels
+    total = counts[:, :3].sum(axis=1)
+    join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.geometric_contact_share * total)
+    return _compact(_union(n, pairs[join])[labels], 0)
+
+
+def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None) -> np.ndarray:
+    """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
+
+    smooth: HxW bool, pixels away from geometric edges; with it, fragments meeting on a smooth
+    surface merge first (merge_geometric)."""
     if n == 0:
         return labels
+    if smooth is not None and params.geometric_merge:
+        labels = merge_geometric(labels, n, depth_m, smooth, params)
+        n = int(labels.max())
     pairs, counts = fragment_contacts(labels, depth_m, params)
     if len(pairs) and params.use_colour:
         if params.agglomerative:
@@ -315,7 +345,7 @@ def cluster_instances(
     but only count for an instance that has enough area of its own in object_mask.
     """
     mask = object_mask | candidate_mask
-    edge = separating_edges(
+    edge, geometric = separating_edges(
         points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
     )
     fragments, n = ndimage.label(mask & ~edge)
@@ -337,7 +367,10 @@ def cluster_instances(
         fragments = np.where(keep[leftover], leftover + offset, fragments)
         fragments = _compact(fragments, 0)
     evidence = np.where(object_mask, area_m2, 0.0)
-    labels = merge_fragments(fragments, int(fragments.max()), depth_m, chroma, evidence, params)
+    r = params.geometric_edge_px
+    near_edge = cv2.dilate(geometric.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+    smooth = object_mask & ~near_edge
+    labels = merge_fragments(fragments, int(fragments.max()), depth_m, chroma, evidence, params, smooth)
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)
     return _relabel_by_size(labels, params.max_instances)

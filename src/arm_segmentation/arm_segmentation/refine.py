@@ -55,8 +55,11 @@ def refine_full_resolution(
     T_world_camera: np.ndarray,
     table_params: TableParams,
     params: RefineParams = RefineParams(),
+    missing_ok: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Full-resolution uint16 labels from working-grid labels (see the module docstring)."""
+    """Full-resolution uint16 labels from working-grid labels (see the module docstring).
+
+    missing_ok: HxW bool, the pixels without depth that may belong to an object (all when None)."""
     shape = depth_m.shape
     n = int(labels_work.max())
     if n == 0:
@@ -86,7 +89,8 @@ def refine_full_resolution(
         above = has_depth & (height > band) & (height <= table_params.max_object_height_m)
         table = has_depth & (np.abs(height) <= band)
     chroma = chromaticity(rgb[crop], blur=params.colour_blur_px)
-    colour_only = (table | ~has_depth) & (near > 0)
+    missing = ~has_depth if missing_ok is None else missing_ok[crop]
+    colour_only = (table | missing) & (near > 0)
     if table_chroma_work is not None:
         table_chroma = up(table_chroma_work)
         cy, cx = np.nonzero(colour_only)

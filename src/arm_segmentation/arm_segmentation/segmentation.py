@@ -13,7 +13,7 @@ from arm_core.camera import backproject_image, transform_points
 from arm_core.frames import validate_frame
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import organized_normals, preprocess_depth
-from arm_segmentation.occluders import OccluderParams, near_occluders
+from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
 from arm_segmentation.refine import RefineParams, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
     SupportLevel,
@@ -24,6 +24,7 @@ from arm_segmentation.table_plane import (
     extend_towards,
     pixel_area_m2,
     support_heights,
+    workspace_levels,
 )
 
 
@@ -125,7 +126,7 @@ def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, sup
     area[~valid] = 0.0
     if levels is None:
         normals_world = normals_camera @ T[:3, :3].T.astype(np.float32)
-        levels = estimate_support_levels(points_world, normals_world, area, valid, params.table)
+        levels = workspace_levels(estimate_support_levels(points_world, normals_world, area, valid, params.table))
         if levels and params.extend_table_to_camera:
             levels[0] = extend_towards(levels[0], T[:2, 3])
     if support is None:
@@ -138,9 +139,21 @@ def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, sup
     return _Stage(smoothed, points_camera, normals_camera, valid, points_world, area, support, table, objects, levels)
 
 
-def _colour(stage: _Stage, rgb, params: SegmentationParams, window_px: int, radius_px: int) -> _Stage:
-    """Adds chromaticity, the local table colour and the candidate mask (pixels without depth or
-    in the table band near objects whose colour is not the table's)."""
+def missing_over_table(depth_m, K, T, levels, params: OccluderParams) -> np.ndarray:
+    """HxW bool: pixels without depth whose viewing ray meets the table inside its footprint.
+
+    Only there can a missing return be an object (dark, shiny) standing on the table; elsewhere it
+    is the background beyond the sensor's range."""
+    out = np.zeros(depth_m.shape, dtype=bool)
+    ys, xs = np.nonzero(depth_m <= 0)
+    if levels and len(ys):
+        out[ys, xs] = expected_table(ys, xs, K, T, levels[0], params)
+    return out
+
+
+def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int, radius_px: int) -> _Stage:
+    """Adds chromaticity, the local table colour and the candidate mask (pixels in the table band,
+    or without depth over the table, near objects whose colour is not the table's)."""
     stage.chroma = chromaticity(rgb)
     stage.candidates = np.zeros_like(stage.objects)
     if np.any(stage.table) and np.any(stage.objects):
@@ -148,7 +161,8 @@ def _colour(stage: _Stage, rgb, params: SegmentationParams, window_px: int, radi
         not_table_colour = hue_distance(stage.chroma, stage.table_chroma) > params.table_colour_threshold
         disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
         near_objects = cv2.dilate(stage.objects.astype(np.uint8), disk) > 0
-        stage.candidates = near_objects & not_table_colour & (stage.table | (stage.smoothed <= 0))
+        missing = missing_over_table(stage.smoothed, K, T, stage.levels, params.occluders)
+        stage.candidates = near_objects & not_table_colour & (stage.table | missing)
     return stage
 
 
@@ -205,19 +219,19 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         support = upsample(stage.support[y0 // stride :, x0 // stride :], stride, depth_full.shape)
         support = support[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
-        _colour(fine, rgb_full[crop], params, params.fine.table_colour_window_px, params.fine.candidate_radius_px)
+        _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, params.fine.candidate_radius_px)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
         labels[crop] = _cluster(fine, cluster, params)
         table = upsample(stage.table, stride, depth_full.shape)
         table[crop] = fine.table
     else:
-        _colour(stage, rgb, params, params.table_colour_window_px, params.candidate_radius_px)
+        _colour(stage, rgb, K, T, params, params.table_colour_window_px, params.candidate_radius_px)
         labels = _cluster(stage, params.cluster, params)
         table = stage.table
         if stride > 1:
             labels = refine_full_resolution(
                 labels, stage.chroma, stage.support, stage.table_chroma, stride, rgb_full, depth_full, K_full, T,
-                params.table, params.refine,
+                params.table, params.refine, missing_over_table(depth_full, K_full, T, stage.levels, params.occluders),
             )  # fmt: skip
             table = upsample(table, stride, depth_full.shape)
     taken = labels[::stride, ::stride] > 0

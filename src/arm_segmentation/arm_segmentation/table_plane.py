@@ -108,6 +108,23 @@ def estimate_support_levels(
     return levels
 
 
+def workspace_levels(levels: list[SupportLevel], params: TableParams = TableParams()) -> list[SupportLevel]:
+    """The levels objects may rest on: the largest level (the table) and the higher levels standing
+    on it (centre of their footprint inside the table's). Lower levels (the floor seen past the
+    table's edge, a lower second table) and higher levels beside the table (other furniture) carry
+    no objects, so their legs, edges and clutter are never instances."""
+    if not levels:
+        return levels
+    table = levels[0]
+    higher = [
+        level
+        for level in levels[1:]
+        if level.height_m > table.height_m + params.band_m
+        and table.contains_xy(level.hull_xy.mean(axis=0), params.footprint_margin_m)
+    ]
+    return [table, *higher]
+
+
 def extend_towards(level: SupportLevel, xy) -> SupportLevel:
     """The level with its footprint grown to the convex hull of the footprint and the point xy.
 
