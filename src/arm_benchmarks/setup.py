@@ -20,6 +20,7 @@ setup(
     entry_points={"console_scripts": [
             "bench_perf = arm_benchmarks.bench_perf:main",
             "bench_seg = arm_benchmarks.bench_seg:main",
+            "make_shape_set = arm_benchmarks.shape_set:main",
             "bench_recon = arm_benchmarks.bench_recon:main",
             "bench_manip = arm_benchmarks.bench_manip:main",
             "bench_robustness = arm_benchmarks.bench_robustness:main",

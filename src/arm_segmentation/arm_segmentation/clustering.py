@@ -46,7 +46,7 @@ class ClusterParams:
     geometric_merge: bool = True  # fragments meeting on one smooth surface merge whatever their colour
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
-    geometric_edge_px: int = 1  # pixels this near a depth jump or concave crease are no smooth contact
+    geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
     max_instances: int = 255
     agglomerative: bool = True  # region merging most similar first (False: one pass over all pairs)
 

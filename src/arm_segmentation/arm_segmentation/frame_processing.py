@@ -6,6 +6,8 @@ arm_ros.colour.COLOUR_ENCODINGS) and undistorts colour and depth to the CameraIn
 and builds the SegmentedFrame and the overlay image to publish; segment_messages() does both.
 """
 
+from collections.abc import Callable
+
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -58,17 +60,19 @@ def undistorted_info(info_msg: CameraInfo) -> CameraInfo:
 
 def segment_frame(
     frame: RgbdFrame, depth_msg: Image, info_msg: CameraInfo, pose_msg: PoseStamped,
-    labels_msg: Image | None = None, params: SegmentationParams | None = None,
+    labels_msg: Image | None = None, params: SegmentationParams | None = None, exclude_fn: Callable | None = None,
 ) -> tuple[SegmentedFrame, Image]:
     """A decoded frame whose T_world_camera is known (pose_msg carries it) -> (SegmentedFrame, overlay
     rgb8 Image). With labels_msg (ground-truth masks) the labels are passed through instead of
-    segmenting. The SegmentedFrame carries the depth message's header, the camera's camera_info (D
+    segmenting; exclude_fn(frame) -> HxW bool marks pixels that are never objects (the robot's self
+    mask). The SegmentedFrame carries the depth message's header, the camera's camera_info (D
     zeroed when the images were undistorted) and pose. Raises FrameError."""
     try:
         if labels_msg is not None:
             frame.labels = labels_from_msg(labels_msg, frame.depth_m.shape)
         else:
-            frame.labels = segment(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, params)
+            exclude = exclude_fn(frame) if exclude_fn is not None else None
+            frame.labels = segment(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, params, exclude)
     except (ConversionError, FrameInputError) as error:
         raise FrameError(str(error)) from error
     segmented = segmented_frame_msg(frame, depth_msg.header, undistorted_info(info_msg), pose_msg.pose)
@@ -83,7 +87,8 @@ def segment_messages(
     pose_msg: PoseStamped,
     labels_msg: Image | None = None,
     params: SegmentationParams | None = None,
+    exclude_fn: Callable | None = None,
 ) -> tuple[SegmentedFrame, Image]:
     """One synchronized frame -> (SegmentedFrame, overlay rgb8 Image); see segment_frame."""
     frame = decode_camera_frame(rgb_msg, depth_msg, info_msg, pose_msg)
-    return segment_frame(frame, depth_msg, info_msg, pose_msg, labels_msg, params)
+    return segment_frame(frame, depth_msg, info_msg, pose_msg, labels_msg, params, exclude_fn)

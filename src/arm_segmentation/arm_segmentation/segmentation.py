@@ -10,7 +10,7 @@ import numpy as np
 from scipy import ndimage
 
 from arm_core.camera import backproject_image, transform_points
-from arm_core.frames import validate_frame
+from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import organized_normals, preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
@@ -62,7 +62,7 @@ class SegmentationParams:
     workspace_min_m: tuple[float, float, float] = (-np.inf, -np.inf, -np.inf)  # world-frame crop box;
     workspace_max_m: tuple[float, float, float] = (np.inf, np.inf, np.inf)  # object points outside are ignored
 
-    fill_radius_px: int = 1
+    fill_radius_px: int = 3
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
@@ -188,8 +188,11 @@ def fine_crop(objects: np.ndarray, stride: int, shape: tuple[int, int], fine: Fi
     return slice(y0, y1), slice(x0, x1)
 
 
-def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None):
+def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
     """Segment one frame; also returns the table mask and the support levels found.
+
+    exclude: optional HxW bool, pixels that are never objects (the robot's own arm, self_filter):
+    they are treated as having no depth and are cleared from the labels.
 
     Support levels are always estimated on the working grid. When the objects fit in a crop of at
     most params.fine.max_pixels full-resolution pixels, they are clustered on that crop at full
@@ -202,6 +205,11 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     params = params or SegmentationParams()
     frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb)
     rgb_full, depth_full, K_full, T = frame.rgb, frame.depth_m, frame.K, frame.T_world_camera
+    if exclude is not None:
+        exclude = np.asarray(exclude, dtype=bool)
+        if exclude.shape != depth_full.shape:
+            raise FrameInputError(f"exclude mask has shape {exclude.shape}, the depth image {depth_full.shape}")
+        depth_full = np.where(exclude, np.float32(0.0), depth_full)
     stride = params.working_stride
     rgb, depth, K = rgb_full, depth_full, K_full
     if stride > 1:
@@ -240,6 +248,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         occluders = upsample(occluders, stride, depth_full.shape)
         add = (labels == 0) & (occluders > 0)
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
+    if exclude is not None and np.any(labels[exclude]):
+        labels = _renumber(np.where(exclude, 0, labels))
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 
@@ -276,6 +286,8 @@ def _renumber(labels: np.ndarray) -> np.ndarray:
     return remap[labels]
 
 
-def segment(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None) -> np.ndarray:
-    """RGB-D frame -> instance labels (uint16 HxW): 0 = table / background, k > 0 = object k."""
-    return segment_detailed(rgb, depth_m, K, T_world_camera, params).labels
+def segment(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None) -> np.ndarray:
+    """RGB-D frame -> instance labels (uint16 HxW): 0 = table / background, k > 0 = object k.
+
+    exclude: optional HxW bool mask of pixels that are never objects (see segment_detailed)."""
+    return segment_detailed(rgb, depth_m, K, T_world_camera, params, exclude).labels

@@ -12,7 +12,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
@@ -22,6 +22,7 @@ from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
 from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_segmentation.segmentation import SegmentationParams
+from arm_segmentation.self_filter import SelfFilterParams, arm_positions, base_pose, self_mask
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
 from arm_segmentation.table_plane import TableParams
 
@@ -94,6 +95,7 @@ class SegmentationNode(Node):
         self.inputs += ["labels"] if self.use_ground_truth else []
         self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, queue)
         self.errors = RateLimitedErrors(self.get_logger())
+        self._declare_self_filter()
         qos = sensor_qos(reliability, depth=1)
         for index, name in enumerate(self.inputs):
             msg_type, topic = TOPICS[name]
@@ -112,6 +114,35 @@ class SegmentationNode(Node):
         self.get_logger().info(
             f"segmentation_node ready ({mode}, camera pose from {pose_source}, sync tolerance {slop_s * 1e3:.0f} ms)"
         )
+
+    def _declare_self_filter(self) -> None:
+        self.self_filter = declare(
+            self, "self_filter", True, "Mask the robot's own arm, rendered from /joint_states, out of the objects"
+        )
+        base_xyz = declare(self, "robot_base_xyz_m", [-0.55, 0.0, 0.0], "World position of the robot base, metres")
+        base_yaw = declare(self, "robot_base_yaw_rad", 0.0, "Yaw of the robot base about world +z, radians")
+        padding = declare(self, "self_filter_padding_m", 0.03, "Margin around the arm's links, metres", 0.0, 0.5)
+        if len(base_xyz) != 3:
+            raise ValueError("robot_base_xyz_m must have 3 values")
+        self.T_world_base = base_pose([float(v) for v in base_xyz], base_yaw)
+        self.self_filter_params = SelfFilterParams(padding_m=padding)
+        self.joint_q = None
+        if self.self_filter:
+            self.create_subscription(JointState, "joint_states", self.on_joint_state, 10)
+
+    def on_joint_state(self, msg: JointState) -> None:
+        try:
+            self.joint_q = arm_positions(msg.name, msg.position)
+        except ValueError as error:
+            self.errors.error("bad_joint_state", f"joint_states ignored: {error}")
+
+    def arm_mask(self, frame):
+        if self.joint_q is None:
+            return None
+        return self_mask(
+            self.joint_q, self.T_world_base, frame.K, frame.T_world_camera, frame.depth_m.shape, frame.depth_m,
+            self.self_filter_params,
+        )  # fmt: skip
 
     def on_message(self, index: int, msg) -> None:
         stamp = stamp_s(msg)
@@ -140,7 +171,9 @@ class SegmentationNode(Node):
             decoded = decode_camera_frame(rgb, depth, camera_info, pose)
             if self.tracker is not None:
                 pose = self.estimated_pose(decoded, depth)
-            frame, overlay = segment_frame(decoded, depth, camera_info, pose, labels, self.params)
+            # the robot base pose is given in the world frame of camera/pose, not an estimated one
+            exclude_fn = self.arm_mask if self.self_filter and self.tracker is None else None
+            frame, overlay = segment_frame(decoded, depth, camera_info, pose, labels, self.params, exclude_fn)
         except FrameError as error:
             self.frames_rejected += 1
             self.last_error = str(error)
@@ -166,6 +199,8 @@ class SegmentationNode(Node):
             "last_latency_ms": self.last_latency_ms,
             "last_instances": self.last_instances,
             "ground_truth_masks": self.use_ground_truth,
+            "self_filter": self.self_filter,
+            "joint_states_received": self.joint_q is not None,
         }
         array = diagnostics_msg(self, "segmentation", values, level, message)
         if self.tracker is not None:
