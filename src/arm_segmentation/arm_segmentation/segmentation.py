@@ -62,7 +62,7 @@ class SegmentationParams:
     workspace_min_m: tuple[float, float, float] = (-np.inf, -np.inf, -np.inf)  # world-frame crop box;
     workspace_max_m: tuple[float, float, float] = (np.inf, np.inf, np.inf)  # object points outside are ignored
 
-    fill_radius_px: int = 3
+    fill_radius_px: int = 1
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
