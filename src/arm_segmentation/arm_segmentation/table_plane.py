@@ -115,6 +115,7 @@ def workspace_levels(levels: list[SupportLevel], params: TableParams = TablePara
     no objects, so their legs, edges and clutter are never instances."""
     if not levels:
         return levels
+    levels = sorted(levels, key=lambda level: -level.area_m2)  # the peak search finds them by peak height
     table = levels[0]
     higher = [
         level
