@@ -63,6 +63,7 @@ class SegmentationParams:
     workspace_max_m: tuple[float, float, float] = (np.inf, np.inf, np.inf)  # object points outside are ignored
 
     fill_radius_px: int = 1
+    missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
@@ -248,9 +249,25 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         occluders = upsample(occluders, stride, depth_full.shape)
         add = (labels == 0) & (occluders > 0)
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
+    labels = trim_missing_rim(labels, depth_full, params.missing_rim_close_px)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
+
+
+def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, close_px: int) -> np.ndarray:
+    """Labels without the pixels lacking depth on the outside of the objects.
+
+    A depth sensor loses the returns along depth edges; such a rim is as likely background as
+    object. Pixels without depth stay labelled only inside the closing (radius close_px) of the
+    labelled pixels that have depth: holes and gaps within objects, not their outer rim."""
+    missing = (labels > 0) & (depth_m <= 0)
+    if close_px <= 0 or not np.any(missing):
+        return labels
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
+    solid = ((labels > 0) & (depth_m > 0)).astype(np.uint8)
+    inside = cv2.morphologyEx(solid, cv2.MORPH_CLOSE, disk) > 0
+    return np.where(missing & ~inside, 0, labels).astype(labels.dtype)
 
 
 def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:
