@@ -243,13 +243,13 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
                 params.table, params.refine, missing_over_table(depth_full, K_full, T, stage.levels, params.occluders),
             )  # fmt: skip
             table = upsample(table, stride, depth_full.shape)
+    labels = trim_missing_rim(labels, depth_full, params.missing_rim_close_px)
     taken = labels[::stride, ::stride] > 0
     occluders = near_occluders(taken, stage.smoothed, rgb, stage.table, K, T, stage.levels, params.occluders)
     if np.any(occluders):
         occluders = upsample(occluders, stride, depth_full.shape)
         add = (labels == 0) & (occluders > 0)
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
-    labels = trim_missing_rim(labels, depth_full, params.missing_rim_close_px)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
