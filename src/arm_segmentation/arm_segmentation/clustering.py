@@ -47,6 +47,8 @@ class ClusterParams:
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
     geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
+    resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
+    thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
     max_instances: int = 255
     agglomerative: bool = True  # region merging most similar first (False: one pass over all pairs)
 
@@ -242,26 +244,43 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
     return owner
 
 
-def merge_geometric(labels, n, depth_m, smooth, params: ClusterParams) -> np.ndarray:
+def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams) -> np.ndarray:
     """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
-    both sides above their support): the parts of one printed object, whatever their colours."""
+    both sides above their support) when one of them cannot be an object on its own: it does not
+    reach down to the support (a label, the upper part of a print) or it is thin (a stripe, a
+    band). Two thick fragments that both rest on the support (boxes standing flush) stay apart,
+    whatever the geometry; colour separates them."""
     pairs, counts = fragment_contacts(labels, depth_m, params, smooth)
     if not len(pairs):
         return labels
     total = counts[:, :3].sum(axis=1)
     join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.geometric_contact_share * total)
+    low = ndimage.minimum(np.where(smooth, height_m, np.inf), labels, np.arange(n + 1))
+    floating = np.asarray(low) > params.resting_height_m
+    inner = np.ones(labels.shape, dtype=np.uint8)
+    inner[:-1] &= labels[:-1] == labels[1:]
+    inner[1:] &= labels[1:] == labels[:-1]
+    inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
+    inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
+    radius_m = cv2.distanceTransform(inner, cv2.DIST_L2, 3) * np.sqrt(area_m2)
+    thin = np.asarray(ndimage.maximum(radius_m, labels, np.arange(n + 1))) < params.thick_fragment_m
+    alone = floating | thin
+    join &= alone[pairs[:, 0]] | alone[pairs[:, 1]]
     return _compact(_union(n, pairs[join])[labels], 0)
 
 
-def merge_fragments(labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None) -> np.ndarray:
+def merge_fragments(
+    labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None
+) -> np.ndarray:
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
 
-    smooth: HxW bool, pixels away from geometric edges; with it, fragments meeting on a smooth
-    surface merge first (merge_geometric)."""
+    smooth: HxW bool, pixels away from geometric edges, and height_m: HxW height above the support
+    (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
+    merge first (merge_geometric)."""
     if n == 0:
         return labels
-    if smooth is not None and params.geometric_merge:
-        labels = merge_geometric(labels, n, depth_m, smooth, params)
+    if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
+        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params)
         n = int(labels.max())
     pairs, counts = fragment_contacts(labels, depth_m, params)
     if len(pairs) and params.use_colour:
@@ -337,9 +356,11 @@ def cluster_instances(
     area_m2: np.ndarray,
     table_chroma: np.ndarray | None = None,
     params: ClusterParams = ClusterParams(),
+    height_m: np.ndarray | None = None,
 ) -> np.ndarray:
     """Instance labels (uint16 HxW, 0 = not an object).
 
+    height_m: HxW height of each pixel above its support level (m), for merge_geometric.
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
     but only count for an instance that has enough area of its own in object_mask.
@@ -370,7 +391,8 @@ def cluster_instances(
     r = params.geometric_edge_px
     near_edge = cv2.dilate(geometric.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
     smooth = object_mask & ~near_edge
-    labels = merge_fragments(fragments, int(fragments.max()), depth_m, chroma, evidence, params, smooth)
+    n = int(fragments.max())
+    labels = merge_fragments(fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2)
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)
     return _relabel_by_size(labels, params.max_instances)

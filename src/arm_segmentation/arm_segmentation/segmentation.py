@@ -64,6 +64,7 @@ class SegmentationParams:
 
     fill_radius_px: int = 1
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
+    rim_window_px: int = 9
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
@@ -170,7 +171,7 @@ def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int
 def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams) -> np.ndarray:
     labels = cluster_instances(
         stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
-        stage.valid, stage.area, stage.table_chroma, cluster,
+        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support,
     )  # fmt: skip
     return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
 
@@ -243,7 +244,7 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
                 params.table, params.refine, missing_over_table(depth_full, K_full, T, stage.levels, params.occluders),
             )  # fmt: skip
             table = upsample(table, stride, depth_full.shape)
-    labels = trim_missing_rim(labels, depth_full, params.missing_rim_close_px)
+    labels = trim_missing_rim(labels, depth_full, rgb_full, params.missing_rim_close_px, params.rim_window_px)
     taken = labels[::stride, ::stride] > 0
     occluders = near_occluders(taken, stage.smoothed, rgb, stage.table, K, T, stage.levels, params.occluders)
     if np.any(occluders):
@@ -255,19 +256,41 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 
-def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, close_px: int) -> np.ndarray:
-    """Labels without the pixels lacking depth on the outside of the objects.
+def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, rgb: np.ndarray, close_px: int, window_px: int):
+    """Labels without the pixels lacking depth on the outside of the objects that look like the
+    background around them.
 
-    A depth sensor loses the returns along depth edges; such a rim is as likely background as
-    object. Pixels without depth stay labelled only inside the closing (radius close_px) of the
-    labelled pixels that have depth: holes and gaps within objects, not their outer rim."""
+    A depth sensor loses the returns along depth edges, on both sides of the edge. Pixels without
+    depth inside the closing (radius close_px) of an instance's pixels with depth are holes and
+    gaps of the object and stay; outside it they stay only where their chromaticity is nearer to
+    the instance's mean than to the mean of the unlabelled pixels with depth within window_px."""
     missing = (labels > 0) & (depth_m <= 0)
     if close_px <= 0 or not np.any(missing):
         return labels
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
-    solid = ((labels > 0) & (depth_m > 0)).astype(np.uint8)
-    inside = cv2.morphologyEx(solid, cv2.MORPH_CLOSE, disk) > 0
-    return np.where(missing & ~inside, 0, labels).astype(labels.dtype)
+    solid = (labels > 0) & (depth_m > 0)
+    rim = missing & ~(cv2.morphologyEx(solid.astype(np.uint8), cv2.MORPH_CLOSE, disk) > 0)
+    if not np.any(rim):
+        return labels
+    chroma = chromaticity(rgb)
+    background = ((labels == 0) & (depth_m > 0)).astype(np.float32)
+    ksize = (window_px, window_px)
+    count = cv2.boxFilter(background, -1, ksize, normalize=False)
+    around = cv2.boxFilter(chroma * background[..., None], -1, ksize, normalize=False)
+    ys, xs = np.nonzero(rim)
+    owner = labels[ys, xs].astype(np.int64)
+    n = int(labels.max())
+    flat = np.where(solid, labels, 0).ravel()
+    size = np.maximum(np.bincount(flat, minlength=n + 1), 1)
+    means = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
+    means /= size[:, None]
+    pixel = chroma[ys, xs]
+    local = around[ys, xs] / np.maximum(count[ys, xs], 1.0)[:, None]
+    to_background = np.where(count[ys, xs] > 0, hue_distance(pixel, local), np.inf)
+    drop = hue_distance(pixel, means[owner]) >= to_background
+    out = labels.copy()
+    out[ys[drop], xs[drop]] = 0
+    return out
 
 
 def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:

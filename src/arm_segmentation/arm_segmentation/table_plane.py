@@ -34,6 +34,7 @@ class SupportLevel:
     area_m2: float
     hull_equations: np.ndarray  # (F, 3): inside where eq[:, :2] @ xy + eq[:, 2] <= 0 (unit normals)
     hull_xy: np.ndarray  # (M, 2) hull vertices, counter-clockwise
+    pixels: int = 0  # inlier pixels in the image
 
     def contains_xy(self, xy: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
         """Boolean (...,) whether points (..., 2) lie inside the footprint grown by margin_m."""
@@ -104,18 +105,18 @@ def estimate_support_levels(
         hull = _hull(xy[inliers])
         if hull is None:
             continue
-        levels.append(SupportLevel(float(height), area, hull[0], hull[1]))
+        levels.append(SupportLevel(float(height), area, hull[0], hull[1], int(np.count_nonzero(inliers))))
     return levels
 
 
 def workspace_levels(levels: list[SupportLevel], params: TableParams = TableParams()) -> list[SupportLevel]:
-    """The levels objects may rest on: the largest level (the table) and the higher levels standing
-    on it (centre of their footprint inside the table's). Lower levels (the floor seen past the
+    """The levels objects may rest on: the level seen in most pixels (the table the camera looks at)
+    and the higher levels standing on it (centre of their footprint inside the table's). Lower levels (the floor seen past the
     table's edge, a lower second table) and higher levels beside the table (other furniture) carry
     no objects, so their legs, edges and clutter are never instances."""
     if not levels:
         return levels
-    levels = sorted(levels, key=lambda level: -level.area_m2)  # the peak search finds them by peak height
+    levels = sorted(levels, key=lambda level: -level.pixels)  # far surfaces (the floor) have large m^2
     table = levels[0]
     higher = [
         level
@@ -135,7 +136,7 @@ def extend_towards(level: SupportLevel, xy) -> SupportLevel:
     hull = _hull(np.vstack([level.hull_xy, np.asarray(xy, dtype=np.float64).reshape(1, 2)]))
     if hull is None:
         return level
-    return SupportLevel(level.height_m, level.area_m2, hull[0], hull[1])
+    return SupportLevel(level.height_m, level.area_m2, hull[0], hull[1], level.pixels)
 
 
 def support_heights(
