@@ -229,7 +229,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         support = upsample(stage.support[y0 // stride :, x0 // stride :], stride, depth_full.shape)
         support = support[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
-        _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, params.fine.candidate_radius_px)
+        window_px, radius_px = params.fine.table_colour_window_px, params.fine.candidate_radius_px
+        _colour(fine, rgb_full[crop], K_crop, T, params, window_px, radius_px)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
         labels[crop] = _cluster(fine, cluster, params)
         table = upsample(stage.table, stride, depth_full.shape)

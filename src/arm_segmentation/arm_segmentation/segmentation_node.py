@@ -120,7 +120,9 @@ class SegmentationNode(Node):
             self, "self_filter", True, "Mask the robot's own arm, rendered from /joint_states, out of the objects"
         )
         base_xyz = declare(self, "robot_base_xyz_m", [-0.55, 0.0, 0.0], "World position of the robot base, metres")
-        base_yaw = declare(self, "robot_base_yaw_rad", 0.0, "Yaw of the robot base about world +z, radians")
+        base_yaw = declare(
+            self, "robot_base_yaw_rad", 0.0, "Yaw of the robot base about world +z, radians", -3.1416, 3.1416
+        )
         padding = declare(self, "self_filter_padding_m", 0.03, "Margin around the arm's links, metres", 0.0, 0.5)
         if len(base_xyz) != 3:
             raise ValueError("robot_base_xyz_m must have 3 values")

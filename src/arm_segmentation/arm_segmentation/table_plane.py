@@ -110,10 +110,11 @@ def estimate_support_levels(
 
 
 def workspace_levels(levels: list[SupportLevel], params: TableParams = TableParams()) -> list[SupportLevel]:
-    """The levels objects may rest on: the level seen in most pixels (the table the camera looks at)
-    and the higher levels standing on it (centre of their footprint inside the table's). Lower levels (the floor seen past the
-    table's edge, a lower second table) and higher levels beside the table (other furniture) carry
-    no objects, so their legs, edges and clutter are never instances."""
+    """The levels objects may rest on: the level seen in most pixels (the table the camera looks
+    at) and the higher levels standing on it (centre of their footprint inside the table's). Lower
+    levels (the floor seen past the table's edge, a lower second table) and higher levels beside
+    the table (other furniture) carry no objects, so their legs, edges and clutter are never
+    instances."""
     if not levels:
         return levels
     levels = sorted(levels, key=lambda level: -level.pixels)  # far surfaces (the floor) have large m^2

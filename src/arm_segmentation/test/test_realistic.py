@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 
 from arm_core.camera import backproject_image, transform_points
+from arm_segmentation.segmentation import segment
+from arm_segmentation.self_filter import arm_positions, base_pose, self_mask
 from arm_sim.camera import look_at
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.views import render_benchmark_view
 from arm_sim.world import SimWorld
-from arm_segmentation.segmentation import segment
-from arm_segmentation.self_filter import base_pose, self_mask
 
 REACH_Q = np.array([0.3, 0.7, 0.0, -1.4, 0.0, 2.1, 0.785])  # the hand at (0.15, 0.2, 0.19) m, over the table
 
@@ -32,7 +32,8 @@ def test_table_edge_legs_floor_and_furniture_are_never_objects(realistic_frames)
     for scene, frame in realistic_frames:
         labels = segment(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera)
         points = transform_points(backproject_image(frame.depth_m, frame.K), frame.T_world_camera)
-        beside = np.any(np.abs(points[..., :2] - scene.table_centre[:2]) > np.add(scene.table_half_extent_m, 0.05), axis=-1)
+        reach = np.add(scene.table_half_extent_m, 0.05)
+        beside = np.any(np.abs(points[..., :2] - scene.table_centre[:2]) > reach, axis=-1)
         off = (frame.labels == 0) & (frame.depth_m > 0) & ((points[..., 2] < scene.table_height_m - 0.03) | beside)
         seen_off_table += int(np.count_nonzero(off))
         off_table += int(np.count_nonzero((labels > 0) & off))
@@ -77,3 +78,14 @@ def test_self_filter_removes_the_arm_and_keeps_the_objects():
     labels = segment(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, exclude=mask)
     assert not np.any(labels[arm])
     assert int(labels.max()) >= 2
+
+
+def test_joint_states_are_checked():
+    names = [f"panda_joint{i}" for i in range(7, 0, -1)] + ["panda_finger_joint1"]
+    q = arm_positions(names, [7, 6, 5, 4, 3, 2, 1, 0.04])
+    assert np.allclose(q, [1, 2, 3, 4, 5, 6, 7])
+    for bad_names, bad_positions in ((names[:3], [0.0] * 3), (names, [0.0] * 3), (names, [np.nan] * 8)):
+        with pytest.raises(ValueError):
+            arm_positions(bad_names, bad_positions)
+    with pytest.raises(ValueError):
+        self_mask(np.zeros(6), np.eye(4), np.eye(3), np.eye(4), (4, 4))
