@@ -65,6 +65,7 @@ class SegmentationParams:
     fill_radius_px: int = 1
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
     rim_window_px: int = 9
+    fill_enclosed_missing: bool = True
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
@@ -246,6 +247,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
             )  # fmt: skip
             table = upsample(table, stride, depth_full.shape)
     labels = trim_missing_rim(labels, depth_full, rgb_full, params.missing_rim_close_px, params.rim_window_px)
+    if params.fill_enclosed_missing:
+        labels = fill_enclosed_missing(labels, depth_full)
     taken = labels[::stride, ::stride] > 0
     occluders = near_occluders(taken, stage.smoothed, rgb, stage.table, K, T, stage.levels, params.occluders)
     if np.any(occluders):
@@ -255,6 +258,23 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
+
+
+def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    """Labels with the pixels without depth that the instances enclose (dropout blobs on dark and
+    shiny objects) given to the nearest instance."""
+    ys, xs = np.nonzero(labels)
+    if len(ys) == 0:
+        return labels
+    box = slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1)
+    crop = labels[box]
+    holes = ndimage.binary_fill_holes(crop > 0) & (crop == 0) & (depth_m[box] <= 0)
+    if not np.any(holes):
+        return labels
+    _, (iy, ix) = ndimage.distance_transform_edt(crop == 0, return_indices=True)
+    out = labels.copy()
+    out[box] = np.where(holes, crop[iy, ix], crop)
+    return out
 
 
 def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, rgb: np.ndarray, close_px: int, window_px: int):
