@@ -285,8 +285,19 @@ def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, rgb: np.ndarray, c
     depth inside the closing (radius close_px) of an instance's pixels with depth are holes and
     gaps of the object and stay; outside it they stay only where their chromaticity is nearer to
     the instance's mean than to the mean of the unlabelled pixels with depth within window_px."""
+    ys, xs = np.nonzero(labels)
+    if close_px <= 0 or len(ys) == 0:
+        return labels
+    m = window_px + close_px
+    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
+    out = labels.copy()
+    out[box] = _trim_rim(labels[box], depth_m[box], rgb[box], close_px, window_px)
+    return out
+
+
+def _trim_rim(labels, depth_m, rgb, close_px: int, window_px: int):
     missing = (labels > 0) & (depth_m <= 0)
-    if close_px <= 0 or not np.any(missing):
+    if not np.any(missing):
         return labels
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
     solid = (labels > 0) & (depth_m > 0)
