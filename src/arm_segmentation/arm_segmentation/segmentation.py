@@ -14,7 +14,7 @@ from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import organized_normals, preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
-from arm_segmentation.refine import RefineParams, refine_full_resolution, upsample
+from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
     SupportLevel,
     TableParams,
@@ -311,11 +311,9 @@ def _trim_rim(labels, depth_m, rgb, close_px: int, window_px: int):
     around = cv2.boxFilter(chroma * background[..., None], -1, ksize, normalize=False)
     ys, xs = np.nonzero(rim)
     owner = labels[ys, xs].astype(np.int64)
-    n = int(labels.max())
-    flat = np.where(solid, labels, 0).ravel()
-    size = np.maximum(np.bincount(flat, minlength=n + 1), 1)
-    means = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
-    means /= size[:, None]
+    means = np.zeros((int(labels.max()) + 1, 3))
+    solid_means = instance_colours(np.where(solid, labels, 0), chroma)
+    means[: len(solid_means)] = solid_means
     pixel = chroma[ys, xs]
     local = around[ys, xs] / np.maximum(count[ys, xs], 1.0)[:, None]
     to_background = np.where(count[ys, xs] > 0, hue_distance(pixel, local), np.inf)
