@@ -43,6 +43,7 @@ class ClusterParams:
     flood_strict_chroma_threshold: float = 0.25  # first flood pass: fragments claim their own colour (0: off)
     grow_radius_px: int = 3
     grow_chroma_threshold: float = 0.12
+    seed_textured_regions: bool = True  # surfaces between geometric edges without a fragment get one
     geometric_merge: bool = True  # fragments meeting on one smooth surface merge whatever their colour
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
@@ -345,6 +346,24 @@ def grow_instances(labels, depth_m, chroma, candidates, table_chroma, params: Cl
     return out
 
 
+def seed_textured_regions(fragments: np.ndarray, smooth: np.ndarray, min_px: int) -> np.ndarray:
+    """Fragments plus one new fragment per region of `smooth` (pixels between geometric edges) that
+    holds none: a printed or striped surface is all colour edges and would otherwise be flooded
+    from a neighbouring object."""
+    regions, n = ndimage.label(smooth)
+    if n == 0:
+        return fragments
+    seeded = np.bincount(regions[fragments > 0], minlength=n + 1) > 0
+    size = np.bincount(regions.ravel(), minlength=n + 1)
+    new = ~seeded & (size >= min_px)
+    new[0] = False
+    if not np.any(new):
+        return fragments
+    ids = np.zeros(n + 1, dtype=np.int64)
+    ids[new] = int(fragments.max()) + np.arange(1, int(new.sum()) + 1)
+    return np.where((fragments == 0) & new[regions], ids[regions], fragments)
+
+
 def cluster_instances(
     points_camera: np.ndarray,
     normals_camera: np.ndarray,
@@ -376,6 +395,8 @@ def cluster_instances(
     keep = sizes >= params.min_fragment_px
     keep[0] = False
     fragments = _compact(np.where(keep[fragments], fragments, 0), 0)
+    if params.seed_textured_regions:
+        fragments = seed_textured_regions(fragments, mask & ~geometric, params.small_fragment_px)
     if params.flood_strict_chroma_threshold > 0:
         fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_strict_chroma_threshold)
     fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_chroma_threshold)
