@@ -22,6 +22,10 @@ TABLE_MARGIN_M = 0.05
 DEFAULT_TABLE_HALF_EXTENT_M = (0.7, 0.5)
 
 
+class SceneError(RuntimeError):
+    """MuJoCo does not compile the reconstructed scene."""
+
+
 def write_object_meshes(obj: ReconstructedObject, folder: pathlib.Path, mesh_format: str) -> dict:
     """object_<id>.<fmt> and object_<id>_part_<j>.<fmt>, in the world frame (metres)."""
     mesh_path = folder / f"object_{obj.id}.{mesh_format}"
@@ -64,7 +68,7 @@ def scene_mjcf(
     name: str,
 ) -> tuple[str, dict[int, str]]:
     """(MJCF text, {object id: body name}) of the table and the objects with usable convex parts.
-    Raises ValueError with MuJoCo's message if the model does not compile."""
+    Raises SceneError with MuJoCo's message if the model does not compile."""
     placed, bodies = [], {}
     simulated = [obj for obj in objects if obj.ok and simulation_parts(obj)]
     for obj in simulated:
@@ -74,6 +78,9 @@ def scene_mjcf(
         bodies[obj.id] = object_body_name(len(placed) - 1)
     table_rgba = mean_colour(rgb, table_mask)
     scene = Scene(placed, float(table_height_m), table_half_extent_m(simulated, support_xy), table_rgba)
-    spec = world_spec(scene, robot_arm=False, name=name)
-    spec.compile()
+    spec = world_spec(scene, robot_arm=False, name=f"reconstruction_{name}")
+    try:
+        spec.compile()
+    except ValueError as error:  # MuJoCo's compiler reports through ValueError
+        raise SceneError(f"the MJCF scene does not compile: {error}") from error
     return spec.to_xml(), bodies

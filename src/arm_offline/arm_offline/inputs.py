@@ -1,14 +1,14 @@
 """The input folder of reconstruct_frames: frame discovery, intrinsics, poses and images.
 
-Layout (a frame is named by the file stem shared by its colour and depth images):
+Input layout (a frame is named by the file stem shared by its colour and depth images):
 
-    FOLDER/color/<frame>.png|.jpg|.jpeg     colour (rgb/ is accepted as the folder name too)
-    FOLDER/depth/<frame>.png                16-bit depth, millimetres unless --depth-scale says otherwise
-    FOLDER/intrinsics.json                  {"fx", "fy", "cx", "cy", "width", "height"} (pixels)
-      or FOLDER/camera_info.yaml            a ROS CameraInfo YAML as written by camera_calibration
-    FOLDER/poses.json                       optional: {"<frame>": 4x4 T_world_camera (nested lists, metres)}
+    DIR/color/<frame>.png|.jpg|.jpeg     colour (rgb/ is accepted as the folder name too)
+    DIR/depth/<frame>.png                16-bit depth, millimetres unless --depth-scale says otherwise
+    DIR/intrinsics.json                  {"fx", "fy", "cx", "cy", "width", "height"} (pixels)
+      or DIR/camera_info.yaml            a ROS CameraInfo YAML as written by camera_calibration
+    DIR/poses.json                       optional: {"<frame>": 4x4 T_world_camera (nested lists, metres)}
 
-Flat names work too: FOLDER/rgb_<frame>.png (or color_<frame>.*) next to FOLDER/depth_<frame>.png.
+Flat names work too: DIR/rgb_<frame>.png (or color_<frame>.*) next to DIR/depth_<frame>.png.
 The camera is the optical frame (x right, y down, z forward); the world frame of given poses should
 have z up (gravity) so that the table is horizontal. Frames missing from poses.json get an estimated pose.
 """
@@ -150,9 +150,9 @@ def load_poses(path: pathlib.Path) -> dict[str, np.ndarray]:
     return poses
 
 
-def _single(paths: list[pathlib.Path], what: str, name: str) -> pathlib.Path:
+def _single(paths: list[pathlib.Path], what: str, name: str, partners: list[pathlib.Path]) -> pathlib.Path:
     if not paths:
-        raise FrameInputError(f"no {what} image for frame '{name}'")
+        raise FrameInputError(f"{', '.join(map(str, partners))}: no {what} image for frame '{name}'")
     if len(paths) > 1:
         raise FrameInputError(f"{len(paths)} {what} images for frame '{name}': {', '.join(map(str, paths))}")
     return paths[0]
@@ -180,8 +180,8 @@ def load_depth_m(path: pathlib.Path, metres_per_unit: float) -> np.ndarray:
 def load_frame(files: FrameFiles, camera: Camera, metres_per_unit: float) -> tuple[np.ndarray, np.ndarray]:
     """(rgb uint8 HxWx3, depth float32 HxW metres, 0 = no return) of one frame, checked against the
     camera's image size. Raises FrameInputError naming the file at fault."""
-    colour_path = _single(files.colour, "colour", files.name)
-    depth_path = _single(files.depth, "depth", files.name)
+    colour_path = _single(files.colour, "colour", files.name, files.depth)
+    depth_path = _single(files.depth, "depth", files.name, files.colour)
     rgb, depth_m = load_rgb(colour_path), load_depth_m(depth_path, metres_per_unit)
     if rgb.shape[:2] != depth_m.shape:
         raise FrameInputError(

@@ -1,9 +1,9 @@
 """reconstruct_frames: a folder of RGB-D frames -> per-frame segmentation, object meshes, convex parts
 and an MJCF scene, without a ROS graph.
 
-    reconstruct_frames FOLDER OUT [--depth-scale 0.001] [--mesh-format ply|obj|stl] [--method arm] [--overwrite]
+    reconstruct_frames --input DIR --output OUT [--depth-scale S] [--mesh-format ply|obj|stl] [--overwrite]
 
-The input layout is described in arm_offline.inputs. Per frame, OUT/<frame>/ receives overlay.png
+Per frame, OUT/<frame>/ receives overlay.png
 (segmentation), labels.png (uint16 instance labels), object_<id>.<fmt> and object_<id>_part_<j>.<fmt>
 (world frame, metres), scene.xml (MJCF: table + objects as free bodies) and result.json; OUT/summary.json
 lists every frame (objects, sizes, timings, pose source, errors). A frame whose result.json exists is
@@ -21,7 +21,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from arm_offline.export import MESH_FORMATS, scene_mjcf, write_object_meshes
+from arm_offline import inputs
+from arm_offline.export import MESH_FORMATS, SceneError, scene_mjcf, write_object_meshes
 from arm_offline.inputs import (
     POSES_FILE,
     Camera,
@@ -38,6 +39,7 @@ from arm_reconstruction.grid import GridInputError
 from arm_reconstruction.pipeline import ReconstructedObject, ReconstructionSettings, Reconstructor
 from arm_segmentation.geometry import InputError
 from arm_segmentation.segmentation import SegmentationParams, segment_detailed
+from arm_segmentation.table_plane import SupportLevel
 from arm_segmentation.visualization import overlay
 
 try:  # TEMPORARY until camera_pose_estimate lands on main: without it, frames need given poses
@@ -50,7 +52,7 @@ except ImportError:
 
 RESULT_FILE, SUMMARY_FILE, SCENE_FILE = "result.json", "summary.json", "scene.xml"
 OVERLAY_FILE, LABELS_FILE = "overlay.png", "labels.png"
-FRAME_ERRORS = (FrameInputError, InputError, GridInputError, CameraPoseError)
+FRAME_ERRORS = (FrameInputError, InputError, GridInputError, CameraPoseError, SceneError)
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,12 @@ class OfflineSettings:
     overwrite: bool = False
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
     reconstruction: ReconstructionSettings = field(default_factory=ReconstructionSettings)
+
+    def __post_init__(self):
+        if self.mesh_format not in MESH_FORMATS:
+            raise ValueError(f"mesh format must be one of {MESH_FORMATS}, got {self.mesh_format!r}")
+        if not np.isfinite(self.metres_per_depth_unit) or self.metres_per_depth_unit <= 0:
+            raise ValueError(f"depth scale must be > 0 metres per unit, got {self.metres_per_depth_unit}")
 
 
 def camera_pose(depth_m: np.ndarray, K: np.ndarray, given: np.ndarray | None) -> tuple[np.ndarray, dict]:
@@ -81,6 +89,20 @@ def undistorted(rgb: np.ndarray, depth_m: np.ndarray, camera: Camera, source: pa
             "give rectified images with zero distortion coefficients"
         )
     return rgb, depth_m
+
+
+def table_support(objects: list[ReconstructedObject], levels: list[SupportLevel]) -> tuple[float, np.ndarray | None]:
+    """(table height in metres, footprint xy of the support level nearest to it): the median of the
+    table heights the reconstruction used under its objects, else the segmentation's largest level."""
+    heights = [obj.grid.table_height_m for obj in objects if obj.ok and obj.grid is not None]
+    if heights:
+        height_m = float(np.median(heights))
+    elif levels:
+        height_m = float(levels[0].height_m)
+    else:
+        return 0.0, None
+    nearest = min(levels, key=lambda level: abs(level.height_m - height_m), default=None)
+    return height_m, nearest.hull_xy if nearest is not None and abs(nearest.height_m - height_m) < 0.02 else None
 
 
 def object_entry(obj: ReconstructedObject, labels: np.ndarray, files: dict, body: str | None) -> dict:
@@ -118,10 +140,6 @@ class FrameReconstructor:
     """Segments and reconstructs frames with one loaded network; writes each frame's outputs."""
 
     def __init__(self, settings: OfflineSettings, reconstructor: Reconstructor | None = None):
-        if settings.mesh_format not in MESH_FORMATS:
-            raise ValueError(f"mesh format must be one of {MESH_FORMATS}, got {settings.mesh_format!r}")
-        if not np.isfinite(settings.metres_per_depth_unit) or settings.metres_per_depth_unit <= 0:
-            raise ValueError(f"depth scale must be > 0 metres per unit, got {settings.metres_per_depth_unit}")
         self.settings = settings
         self.reconstructor = reconstructor or Reconstructor(settings.reconstruction)
 
@@ -146,8 +164,8 @@ class FrameReconstructor:
             timings["export"] = time.perf_counter() - start - sum(timings.values())
         except FRAME_ERRORS as error:
             entry["error"] = str(error)
-        except ValueError as error:  # MuJoCo's compiler rejects the scene: the frame fails, others go on
-            entry["error"] = f"scene does not compile: {error}"
+        except Exception as error:  # an unforeseen failure on one frame must not stop the others
+            entry["error"] = f"unexpected {type(error).__name__}: {error}"
         else:
             entry["ok"] = True
         timings["total"] = time.perf_counter() - start
@@ -165,9 +183,7 @@ class FrameReconstructor:
         folder.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(folder / OVERLAY_FILE), overlay(rgb, labels)[..., ::-1])
         cv2.imwrite(str(folder / LABELS_FILE), labels.astype(np.uint16))
-        levels = segmentation.levels
-        table_height_m = float(levels[0].height_m) if levels else 0.0
-        support_xy = levels[0].hull_xy if levels else None
+        table_height_m, support_xy = table_support(objects, segmentation.levels)
         xml, bodies = scene_mjcf(objects, rgb, labels, segmentation.table_mask, table_height_m, support_xy, name)
         (folder / SCENE_FILE).write_text(xml)
         entries = []
@@ -242,10 +258,15 @@ def _finish(summary: dict, output_dir: pathlib.Path) -> dict:
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="reconstruct_frames", description=__doc__.split("\n\n")[0])
-    parser.add_argument("input", type=pathlib.Path, help="folder of frames (layout: see arm_offline/inputs.py)")
-    parser.add_argument("output", type=pathlib.Path, help="output folder")
-    parser.add_argument("--depth-scale", type=float, default=0.001, help="metres per depth unit (default 0.001: mm)")
+    parser = argparse.ArgumentParser(
+        prog="reconstruct_frames",
+        description=__doc__.split("\n\n")[0] + "\n\n" + __doc__.split("\n\n")[2],
+        epilog=inputs.__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--input", type=pathlib.Path, required=True, metavar="DIR", help="frames (layout below)")
+    parser.add_argument("--output", type=pathlib.Path, required=True, metavar="OUT", help="output folder")
+    parser.add_argument("--depth-scale", type=float, default=0.001, metavar="S", help="metres per unit (0.001: mm)")
     parser.add_argument("--intrinsics", type=pathlib.Path, help="intrinsics.json or CameraInfo YAML")
     parser.add_argument("--poses", type=pathlib.Path, help=f"poses JSON (default: input/{POSES_FILE} if present)")
     parser.add_argument("--mesh-format", choices=MESH_FORMATS, default="ply")
@@ -270,7 +291,7 @@ def main(argv=None) -> int:
         reconstruction = ReconstructionSettings(method=args.method, checkpoint_path=args.checkpoint, device=args.device)
         settings = OfflineSettings(args.depth_scale, args.mesh_format, args.overwrite, reconstruction=reconstruction)
         reconstructor = Reconstructor(reconstruction)
-    except (ValueError, KeyError, CheckpointError) as error:
+    except (ValueError, CheckpointError) as error:
         args.parser.error(str(error))
     summary = reconstruct_folder(
         args.input, args.output, settings, args.intrinsics, args.poses, not args.no_progress, reconstructor

@@ -73,7 +73,7 @@ def test_frames_are_reconstructed_into_meshes_and_a_loadable_scene(frames_folder
     assert sorted(entries) == ["000000", "000001", "000002", "000003"]
     assert (summary["n_ok"], summary["n_failed"]) == (2, 2)
     assert "000002.png" in entries["000002"]["error"] and "decode" in entries["000002"]["error"]
-    assert "no depth image" in entries["000003"]["error"]
+    assert "000003.png: no depth image" in entries["000003"]["error"]
     for name, true_count in visible.items():
         entry = entries[name]
         assert entry["ok"] and entry["pose_source"] == "given", entry["error"]
@@ -84,6 +84,11 @@ def test_frames_are_reconstructed_into_meshes_and_a_loadable_scene(frames_folder
         bodies = [o["body"] for o in entry["objects"] if o["ok"]]
         assert len(bodies) == entry["n_reconstructed"] and all(model.body(b).id > 0 for b in bodies)
         assert model.ngeom == 2 + sum(len(o["convex_parts"]) for o in entry["objects"] if o["ok"])
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        start_m = data.xpos[1:].copy()
+        mujoco.mj_step(model, data, nstep=250)  # 0.5 s: the objects rest on the table
+        assert np.abs(data.xpos[1:] - start_m).max() < 0.02
         for obj in entry["objects"]:
             mesh = trimesh.load(out / obj["mesh"], force="mesh")
             assert mesh.is_watertight and mesh.volume > 0
@@ -107,19 +112,22 @@ def test_finished_frames_are_skipped_unless_overwrite(frames_folder, reconstruct
 
 def test_console_script_exit_status(frames_folder, tmp_path):
     folder, _ = frames_folder
-    run = subprocess.run(["reconstruct_frames", str(folder), str(tmp_path / "out"), "--mesh-format", "stl"],
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    command = ["reconstruct_frames", "--input", str(folder), "--output", str(tmp_path / "out"), "--mesh-format", "stl"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
-    assert "000002.png" in run.stderr and "no depth image" in run.stderr
+    assert "000002.png" in run.stderr and "000003.png: no depth image" in run.stderr
     assert list((tmp_path / "out" / "000001").glob("object_*.stl"))
     with pytest.raises(SystemExit) as exit_info:
-        main([str(tmp_path / "missing"), str(tmp_path / "o")])
+        main(["--input", str(tmp_path / "missing"), "--output", str(tmp_path / "o")])
+    assert exit_info.value.code == 2
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--input", str(folder), "--output", str(tmp_path / "o"), "--depth-scale", "0"])
     assert exit_info.value.code == 2
     broken = tmp_path / "broken"
     (broken / "color").mkdir(parents=True)
     shutil.copy(folder / "intrinsics.json", broken)
     shutil.copy(folder / "color" / "000000.png", broken / "color")
-    assert main([str(broken), str(tmp_path / "o"), "--no-progress"]) == 1
+    assert main(["--input", str(broken), "--output", str(tmp_path / "o"), "--no-progress"]) == 1
 
 
 def test_camera_info_yaml_and_bad_intrinsics(tmp_path):
