@@ -42,6 +42,7 @@ class Camera:
     height: int
     distortion_model: str = ""
     distortion: tuple[float, ...] = ()
+    path: pathlib.Path | None = None
 
     @property
     def distorted(self) -> bool:
@@ -110,7 +111,7 @@ def load_camera(path: pathlib.Path) -> Camera:
         missing = [key for key in ("fx", "fy", "cx", "cy", "width", "height") if key not in data]
         if missing:
             raise FrameInputError(f"{path}: missing {', '.join(missing)}")
-        return Camera(*_pinhole(*(data[k] for k in ("fx", "fy", "cx", "cy", "width", "height")), path))
+        return Camera(*_pinhole(*(data[k] for k in ("fx", "fy", "cx", "cy", "width", "height")), path), path=path)
     try:
         matrix = np.asarray(data["camera_matrix"]["data"], dtype=np.float64).reshape(3, 3)
         width, height = data["image_width"], data["image_height"]
@@ -120,7 +121,7 @@ def load_camera(path: pathlib.Path) -> Camera:
             f"{path}: not a CameraInfo YAML (needs image_width, image_height, camera_matrix.data: 9 numbers; {error!r})"
         ) from error
     K, width, height = _pinhole(matrix[0, 0], matrix[1, 1], matrix[0, 2], matrix[1, 2], width, height, path)
-    return Camera(K, width, height, str(data.get("distortion_model") or ""), distortion)
+    return Camera(K, width, height, str(data.get("distortion_model") or ""), distortion, path)
 
 
 def load_poses(path: pathlib.Path) -> dict[str, np.ndarray]:

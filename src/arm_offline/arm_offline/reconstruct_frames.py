@@ -42,6 +42,15 @@ from arm_segmentation.segmentation import SegmentationParams, segment_detailed
 from arm_segmentation.table_plane import SupportLevel
 from arm_segmentation.visualization import overlay
 
+try:  # TEMPORARY until arm_core.distortion lands on main: without it, distorted images are refused
+    from arm_core.distortion import DistortionError, Undistorter
+except ImportError:
+    Undistorter = None
+
+    class DistortionError(ValueError):
+        pass
+
+
 try:  # TEMPORARY until camera_pose_estimate lands on main: without it, frames need given poses
     from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
 except ImportError:
@@ -80,15 +89,6 @@ def camera_pose(depth_m: np.ndarray, K: np.ndarray, given: np.ndarray | None) ->
     estimate = estimate_camera_pose(depth_m, K)
     fields = {"pose_source": "estimated", "pose_inlier_fraction": float(estimate.inlier_fraction)}
     return estimate.T_world_camera, fields
-
-
-def undistorted(rgb: np.ndarray, depth_m: np.ndarray, camera: Camera, source: pathlib.Path):
-    if camera.distorted:
-        raise FrameInputError(
-            f"{source}: non-zero distortion ({camera.distortion_model} {list(camera.distortion)}) is not supported: "
-            "give rectified images with zero distortion coefficients"
-        )
-    return rgb, depth_m
 
 
 def table_support(objects: list[ReconstructedObject], levels: list[SupportLevel]) -> tuple[float, np.ndarray | None]:
@@ -142,6 +142,19 @@ class FrameReconstructor:
     def __init__(self, settings: OfflineSettings, reconstructor: Reconstructor | None = None):
         self.settings = settings
         self.reconstructor = reconstructor or Reconstructor(settings.reconstruction)
+        self.undistorter = Undistorter() if Undistorter is not None else None
+
+    def undistorted(self, rgb: np.ndarray, depth_m: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """The images resampled to the camera's pinhole K when it has lens distortion."""
+        if not camera.distorted:
+            return rgb, depth_m
+        model = f"{camera.distortion_model} {list(camera.distortion)}"
+        if self.undistorter is None:
+            raise FrameInputError(f"{camera.path}: distortion {model} is not supported: give rectified images")
+        try:
+            return self.undistorter.undistort(rgb, depth_m, camera.distortion_model, camera.distortion, camera.K)
+        except DistortionError as error:
+            raise FrameInputError(f"{camera.path}: cannot undistort with {model}: {error}") from error
 
     def __call__(self, files: FrameFiles, camera: Camera, pose: np.ndarray | None, folder: pathlib.Path) -> dict:
         """Process one frame into folder; returns its summary entry (ok False with error on failure)."""
@@ -150,7 +163,7 @@ class FrameReconstructor:
         timings, start = {}, time.perf_counter()
         try:
             rgb, depth_m = load_frame(files, camera, self.settings.metres_per_depth_unit)
-            rgb, depth_m = undistorted(rgb, depth_m, camera, files.depth[0])
+            rgb, depth_m = self.undistorted(rgb, depth_m, camera)
             timings["load"] = time.perf_counter() - start
             T_world_camera, pose_fields = camera_pose(depth_m, camera.K, pose)
             entry |= pose_fields | {"T_world_camera": np.round(T_world_camera, 6).tolist()}
