@@ -27,13 +27,14 @@ class SceneError(RuntimeError):
 
 
 def write_object_meshes(obj: ReconstructedObject, folder: pathlib.Path, mesh_format: str) -> dict:
-    """object_<id>.<fmt> and object_<id>_part_<j>.<fmt>, in the world frame (metres)."""
+    """object_<id>.<fmt> and object_<id>_part_<j>.<fmt> (the parts the MJCF scene collides with), in
+    the world frame (metres)."""
     mesh_path = folder / f"object_{obj.id}.{mesh_format}"
     obj.world_mesh().export(mesh_path)
     part_paths = []
-    for j, part in enumerate(obj.world_convex_parts()):
+    for j, part in enumerate(simulation_parts(obj)):
         part_paths.append(folder / f"object_{obj.id}_part_{j}.{mesh_format}")
-        part.export(part_paths[-1])
+        part.copy().apply_transform(obj.T_world_object).export(part_paths[-1])
     return {"mesh": mesh_path.name, "convex_parts": [p.name for p in part_paths]}
 
 
