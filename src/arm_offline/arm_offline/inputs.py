@@ -21,16 +21,14 @@ import cv2
 import numpy as np
 import yaml
 
+from arm_core.frames import FrameInputError  # raised here for a missing, unreadable or inconsistent file
+
 COLOUR_SUFFIXES = (".png", ".jpg", ".jpeg")
 COLOUR_DIRS = ("color", "rgb")
 COLOUR_PREFIXES = ("rgb_", "color_")
 DEPTH_DIR, DEPTH_PREFIX = "depth", "depth_"
 INTRINSICS_FILES = ("intrinsics.json", "camera_info.yaml", "camera_info.yml")
 POSES_FILE = "poses.json"
-
-
-class FrameInputError(ValueError):
-    """An input file is missing, unreadable or inconsistent; the message names the file."""
 
 
 @dataclass(frozen=True)

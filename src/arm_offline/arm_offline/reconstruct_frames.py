@@ -21,13 +21,14 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from arm_core.atomic_io import atomic_write_json
+from arm_core.frames import FrameInputError
 from arm_offline import inputs
 from arm_offline.export import MESH_FORMATS, SceneError, scene_mjcf, write_object_meshes
 from arm_offline.inputs import (
     POSES_FILE,
     Camera,
     FrameFiles,
-    FrameInputError,
     find_frames,
     find_intrinsics,
     load_camera,
@@ -35,9 +36,7 @@ from arm_offline.inputs import (
     load_poses,
 )
 from arm_reconstruction.checkpoint import CheckpointError
-from arm_reconstruction.grid import GridInputError
 from arm_reconstruction.pipeline import ReconstructedObject, ReconstructionSettings, Reconstructor
-from arm_segmentation.geometry import InputError
 from arm_segmentation.segmentation import SegmentationParams, segment_detailed
 from arm_segmentation.table_plane import SupportLevel
 from arm_segmentation.visualization import overlay
@@ -61,7 +60,7 @@ except ImportError:
 
 RESULT_FILE, SUMMARY_FILE, SCENE_FILE = "result.json", "summary.json", "scene.xml"
 OVERLAY_FILE, LABELS_FILE = "overlay.png", "labels.png"
-FRAME_ERRORS = (FrameInputError, InputError, GridInputError, CameraPoseError, SceneError)
+FRAME_ERRORS = (FrameInputError, CameraPoseError, SceneError)  # FrameInputError covers GridInputError
 
 
 @dataclass(frozen=True)
@@ -187,7 +186,7 @@ class FrameReconstructor:
             entry["timings_s"]["reconstruction_stages"] = {
                 k: round(v, 4) for k, v in self.reconstructor.last_timings_s.items()
             }
-            (folder / RESULT_FILE).write_text(json.dumps(entry, indent=1))
+            atomic_write_json(folder / RESULT_FILE, entry, indent=1)
         return entry
 
     def _write(self, folder: pathlib.Path, name: str, rgb, labels, segmentation, objects) -> dict:
@@ -266,7 +265,7 @@ def _finish(summary: dict, output_dir: pathlib.Path) -> dict:
     summary["n_ok"] = sum(f["ok"] for f in frames)
     summary["n_skipped"] = sum(f["skipped"] for f in frames)
     summary["n_failed"] = len(frames) - summary["n_ok"]
-    (output_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=1))
+    atomic_write_json(output_dir / SUMMARY_FILE, summary, indent=1)
     return summary
 
 

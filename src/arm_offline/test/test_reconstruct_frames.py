@@ -11,7 +11,8 @@ import torch
 import trimesh
 
 from arm_core.camera import look_at
-from arm_offline.inputs import FrameInputError, find_frames, load_camera, load_frame, load_poses
+from arm_core.frames import FrameInputError
+from arm_offline.inputs import find_frames, load_camera, load_frame, load_poses
 from arm_offline.reconstruct_frames import SUMMARY_FILE, FrameReconstructor, OfflineSettings, main, reconstruct_folder
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor
 from arm_sim.objects import object_pool
