@@ -39,7 +39,8 @@ def frames_folder(tmp_path_factory):
     intrinsics; plus a corrupt colour PNG and a colour image without depth."""
     folder = tmp_path_factory.mktemp("frames")
     rng = np.random.default_rng(3)
-    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=3, scale_range=(1.0, 1.5))
+    pool = object_pool(split="train", seed=0)  # plain domain: the command is under test, not segmentation quality
+    scene = cluttered_scene(pool, rng, n_objects=3, scale_range=(1.0, 1.5), domain="plain")
     world = SimWorld(scene, robot_arm=False, width=WIDTH, height=HEIGHT)
     centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
     poses, visible = {}, {}
