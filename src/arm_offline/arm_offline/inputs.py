@@ -33,7 +33,8 @@ POSES_FILE = "poses.json"
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole intrinsics (K in pixels) of images width x height; distortion as in CameraInfo."""
+    """Pinhole intrinsics (K in pixels) of images width x height; distortion as in CameraInfo
+    (arm_core.distortion undistorts); path: the file it was read from."""
 
     K: np.ndarray
     width: int
@@ -41,10 +42,6 @@ class Camera:
     distortion_model: str = ""
     distortion: tuple[float, ...] = ()
     path: pathlib.Path | None = None
-
-    @property
-    def distorted(self) -> bool:
-        return any(abs(d) > 0 for d in self.distortion)
 
 
 @dataclass

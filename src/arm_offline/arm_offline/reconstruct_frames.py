@@ -22,6 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write_json
+from arm_core.distortion import DistortionError, Undistorter
 from arm_core.frames import FrameInputError
 from arm_offline import inputs
 from arm_offline.export import MESH_FORMATS, SceneError, scene_mjcf, write_object_meshes
@@ -37,26 +38,10 @@ from arm_offline.inputs import (
 )
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.pipeline import ReconstructedObject, ReconstructionSettings, Reconstructor
+from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
 from arm_segmentation.segmentation import SegmentationParams, segment_detailed
 from arm_segmentation.table_plane import SupportLevel
 from arm_segmentation.visualization import overlay
-
-try:  # TEMPORARY until arm_core.distortion lands on main: without it, distorted images are refused
-    from arm_core.distortion import DistortionError, Undistorter
-except ImportError:
-    Undistorter = None
-
-    class DistortionError(ValueError):
-        pass
-
-
-try:  # TEMPORARY until camera_pose_estimate lands on main: without it, frames need given poses
-    from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
-except ImportError:
-    estimate_camera_pose = None
-
-    class CameraPoseError(ValueError):
-        pass
 
 RESULT_FILE, SUMMARY_FILE, SCENE_FILE = "result.json", "summary.json", "scene.xml"
 OVERLAY_FILE, LABELS_FILE = "overlay.png", "labels.png"
@@ -83,8 +68,6 @@ def camera_pose(depth_m: np.ndarray, K: np.ndarray, given: np.ndarray | None) ->
     depth's dominant plane. Raises CameraPoseError when no pose can be estimated."""
     if given is not None:
         return given, {"pose_source": "given"}
-    if estimate_camera_pose is None:
-        raise CameraPoseError("no pose given and pose estimation is not available")
     estimate = estimate_camera_pose(depth_m, K)
     fields = {"pose_source": "estimated", "pose_inlier_fraction": float(estimate.inlier_fraction)}
     return estimate.T_world_camera, fields
@@ -141,18 +124,14 @@ class FrameReconstructor:
     def __init__(self, settings: OfflineSettings, reconstructor: Reconstructor | None = None):
         self.settings = settings
         self.reconstructor = reconstructor or Reconstructor(settings.reconstruction)
-        self.undistorter = Undistorter() if Undistorter is not None else None
+        self.undistorter = Undistorter()
 
     def undistorted(self, rgb: np.ndarray, depth_m: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-        """The images resampled to the camera's pinhole K when it has lens distortion."""
-        if not camera.distorted:
-            return rgb, depth_m
-        model = f"{camera.distortion_model} {list(camera.distortion)}"
-        if self.undistorter is None:
-            raise FrameInputError(f"{camera.path}: distortion {model} is not supported: give rectified images")
+        """The images resampled to the camera's pinhole K (as given when the distortion is all zero)."""
         try:
             return self.undistorter.undistort(rgb, depth_m, camera.distortion_model, camera.distortion, camera.K)
         except DistortionError as error:
+            model = f"{camera.distortion_model} {list(camera.distortion)}"
             raise FrameInputError(f"{camera.path}: cannot undistort with {model}: {error}") from error
 
     def __call__(self, files: FrameFiles, camera: Camera, pose: np.ndarray | None, folder: pathlib.Path) -> dict:

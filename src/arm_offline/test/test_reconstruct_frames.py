@@ -141,9 +141,10 @@ def test_camera_info_yaml_and_bad_intrinsics(tmp_path):
     )
     camera = load_camera(info)
     np.testing.assert_allclose(camera.K, [[290.0, 0, 160.5], [0, 291.0, 120.5], [0, 0, 1]])
-    assert (camera.width, camera.height, camera.distorted) == (320, 240, False)
+    assert (camera.width, camera.height, camera.distortion_model) == (320, 240, "plumb_bob")
+    assert camera.distortion == (0,) * 5
     info.write_text(info.read_text().replace("[0, 0, 0, 0, 0]", "[0.1, -0.2, 0, 0, 0]"))
-    assert load_camera(info).distorted
+    assert load_camera(info).distortion == (0.1, -0.2, 0, 0, 0)
     bad = tmp_path / "intrinsics.json"
     bad.write_text(json.dumps({"fx": -1, "fy": 300, "cx": 160, "cy": 120, "width": 320, "height": 240}))
     with pytest.raises(FrameInputError, match="invalid intrinsics"):
@@ -158,7 +159,6 @@ def test_camera_info_yaml_and_bad_intrinsics(tmp_path):
 
 
 def test_poses_are_estimated_when_not_given(frames_folder, reconstructor, tmp_path):
-    pytest.importorskip("arm_segmentation.camera_pose_estimate")  # TEMPORARY until it lands on main
     folder, visible = frames_folder
     given = reconstruct_folder(folder, tmp_path / "given", OfflineSettings(), reconstructor=reconstructor)
     unposed = tmp_path / "unposed"
@@ -176,7 +176,7 @@ def test_poses_are_estimated_when_not_given(frames_folder, reconstructor, tmp_pa
         mujoco.MjModel.from_xml_path(str(tmp_path / "estimated" / entry["frame"] / entry["scene"]))
 
 
-def test_distorted_images_are_undistorted_or_refused(frames_folder, reconstructor, tmp_path):
+def test_distorted_images_are_undistorted_and_unknown_models_refused(frames_folder, reconstructor, tmp_path):
     folder, _ = frames_folder
     camera = load_camera(folder / "intrinsics.json")
     process = FrameReconstructor(OfflineSettings(), reconstructor)
@@ -185,10 +185,7 @@ def test_distorted_images_are_undistorted_or_refused(frames_folder, reconstructo
                         tmp_path / "plumb_bob")  # fmt: skip
     unknown = process(files, replace(camera, distortion_model="mystery", distortion=(0.1,)), pose, tmp_path / "u")
     assert not unknown["ok"] and "intrinsics.json" in unknown["error"] and "mystery [0.1]" in unknown["error"]
-    if process.undistorter is None:  # TEMPORARY until arm_core.distortion lands on main
-        assert not plumb_bob["ok"] and "distortion plumb_bob [0.05" in plumb_bob["error"]
-    else:
-        assert plumb_bob["ok"], plumb_bob["error"]
+    assert plumb_bob["ok"], plumb_bob["error"]
 
 
 def test_depth_dtype_and_size_mismatch_are_named(frames_folder, tmp_path):
