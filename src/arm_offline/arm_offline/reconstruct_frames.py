@@ -3,11 +3,11 @@ and an MJCF scene, without a ROS graph.
 
     reconstruct_frames --input DIR --output OUT [--depth-scale S] [--mesh-format ply|obj|stl] [--overwrite]
 
-Per frame, OUT/<frame>/ receives overlay.png
-(segmentation), labels.png (uint16 instance labels), object_<id>.<fmt> and object_<id>_part_<j>.<fmt>
-(world frame, metres), scene.xml (MJCF: table + objects as free bodies) and result.json; OUT/summary.json
-lists every frame (objects, sizes, timings, pose source, errors). A frame whose result.json exists is
-skipped unless --overwrite. Exit status: 0 if any frame succeeded, 1 if none did, 2 for bad arguments.
+Per frame, OUT/<frame>/ receives overlay.png (segmentation), labels.png (uint16 instance labels),
+object_<id>.<fmt> and object_<id>_part_<j>.<fmt> (world frame, metres), scene.xml (MJCF: table +
+objects as free bodies) and result.json; OUT/summary.json lists every frame (objects, sizes, timings,
+pose source, errors). A frame whose result.json exists is skipped unless --overwrite.
+Exit status: 0 if any frame succeeded, 1 if none did, 2 for bad arguments.
 """
 
 import argparse
