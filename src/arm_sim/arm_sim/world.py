@@ -24,6 +24,11 @@ def object_body_name(i: int) -> str:
 def build_world(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: str = "arm_world") -> mujoco.MjModel:
     """MuJoCo model of a Scene: table, floor, one free body per object (its convex parts as mesh
     geoms), the robot and a render camera. The planner's twin is built by this same function."""
+    return world_spec(scene, robot_arm, timestep_s, name).compile()
+
+
+def world_spec(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: str = "arm_world") -> mujoco.MjSpec:
+    """The uncompiled MjSpec that build_world compiles (spec.to_xml() gives its MJCF)."""
     spec = mujoco.MjSpec()
     spec.modelname = name
     spec.compiler.degree = False
@@ -62,7 +67,7 @@ def build_world(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: 
         _add_object(spec, i, placed, None if appearance is None else appearance.objects[i])
     if robot_arm:
         robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
-    return spec.compile()
+    return spec
 
 
 def _add_texture(spec: mujoco.MjSpec, name: str, image: np.ndarray, cube: bool) -> None:

@@ -1,0 +1,87 @@
+"""Outputs of one reconstructed frame: object meshes and convex parts, and the MJCF scene.
+
+The MJCF comes from arm_sim's world builder (the same code path as the simulator and the planner's
+twin): the table box, the floor and one free body per object with its convex parts as collision
+geoms; no robot. The builder centres the table at the world origin, so the table box is made large
+enough to cover the support plane's footprint and the objects.
+"""
+
+import pathlib
+
+import numpy as np
+import trimesh
+
+from arm_reconstruction.pipeline import ReconstructedObject
+from arm_sim.objects import ObjectModel
+from arm_sim.scenes import PlacedObject, Scene
+from arm_sim.world import object_body_name, world_spec
+
+MESH_FORMATS = ("ply", "obj", "stl")
+MIN_PART_VOLUME_M3 = 1e-10  # MuJoCo's mesh compiler rejects flat hulls
+TABLE_MARGIN_M = 0.05
+DEFAULT_TABLE_HALF_EXTENT_M = (0.7, 0.5)
+
+
+class SceneError(RuntimeError):
+    """MuJoCo does not compile the reconstructed scene."""
+
+
+def write_object_meshes(obj: ReconstructedObject, folder: pathlib.Path, mesh_format: str) -> dict:
+    """object_<id>.<fmt> and object_<id>_part_<j>.<fmt> (the parts the MJCF scene collides with), in
+    the world frame (metres)."""
+    mesh_path = folder / f"object_{obj.id}.{mesh_format}"
+    obj.world_mesh().export(mesh_path)
+    part_paths = []
+    for j, part in enumerate(simulation_parts(obj)):
+        part_paths.append(folder / f"object_{obj.id}_part_{j}.{mesh_format}")
+        part.copy().apply_transform(obj.T_world_object).export(part_paths[-1])
+    return {"mesh": mesh_path.name, "convex_parts": [p.name for p in part_paths]}
+
+
+def simulation_parts(obj: ReconstructedObject) -> list[trimesh.Trimesh]:
+    return [p for p in obj.convex_parts if len(p.vertices) >= 4 and abs(p.volume) > MIN_PART_VOLUME_M3]
+
+
+def mean_colour(rgb: np.ndarray, mask: np.ndarray) -> tuple[float, float, float, float]:
+    """RGBA (0..1) of the mean colour of the masked pixels (grey when there are none)."""
+    pixels = rgb[mask]
+    mean = pixels.mean(axis=0) / 255.0 if len(pixels) else np.full(3, 0.6)
+    return (*(float(c) for c in mean), 1.0)
+
+
+def table_half_extent_m(objects: list[ReconstructedObject], support_xy: np.ndarray | None) -> tuple[float, float]:
+    """Half extents of an origin-centred table box covering the support footprint and the objects."""
+    xy = [np.asarray(support_xy).reshape(-1, 2)] if support_xy is not None else []
+    xy += [obj.world_mesh().bounds[:, :2] for obj in objects]
+    if not any(len(a) for a in xy):
+        return DEFAULT_TABLE_HALF_EXTENT_M
+    reach = np.abs(np.concatenate(xy)).max(axis=0) + TABLE_MARGIN_M
+    return float(reach[0]), float(reach[1])
+
+
+def scene_mjcf(
+    objects: list[ReconstructedObject],
+    rgb: np.ndarray,
+    labels: np.ndarray,
+    table_mask: np.ndarray,
+    table_height_m: float,
+    support_xy: np.ndarray | None,
+    name: str,
+) -> tuple[str, dict[int, str]]:
+    """(MJCF text, {object id: body name}) of the table and the objects with usable convex parts.
+    Raises SceneError with MuJoCo's message if the model does not compile."""
+    placed, bodies = [], {}
+    simulated = [obj for obj in objects if obj.ok and simulation_parts(obj)]
+    for obj in simulated:
+        parts = simulation_parts(obj)
+        model = ObjectModel(f"recon_{obj.id}", "reconstructed", obj.mesh, parts)
+        placed.append(PlacedObject(model, 1.0, obj.T_world_object, mean_colour(rgb, labels == obj.id)))
+        bodies[obj.id] = object_body_name(len(placed) - 1)
+    table_rgba = mean_colour(rgb, table_mask)
+    scene = Scene(placed, float(table_height_m), table_half_extent_m(simulated, support_xy), table_rgba)
+    spec = world_spec(scene, robot_arm=False, name=f"reconstruction_{name}")
+    try:
+        spec.compile()
+    except ValueError as error:  # MuJoCo's compiler reports through ValueError
+        raise SceneError(f"the MJCF scene does not compile: {error}") from error
+    return spec.to_xml(), bodies
