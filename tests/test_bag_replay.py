@@ -97,7 +97,7 @@ def test_replayed_bag_reproduces_the_live_meshes(work_dir, recon_params):
                 args=(str(bag),),
                 params={
                     "mode": "consumed",
-                    "topics": CAMERA,
+                    "topics": CAMERA + ["joint_states"],  # the self filter needs the arm's joint states
                     "start_offset_s": max(0.0, window[0] * 1e-9),
                     "duration_s": (window[1] - start_ns) * 1e-9 - max(0.0, window[0] * 1e-9),
                     "wait_subscribers_s": 60.0,
