@@ -14,6 +14,8 @@ from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
 from arm_benchmarks.recon.summary import summarise, visibility_bin
 from arm_planner.twin import TwinObject
+from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
+from arm_reconstruction.train import train
 
 torch.set_num_threads(2)
 
@@ -80,8 +82,6 @@ def test_arguments_are_validated():
 @pytest.fixture(scope="module")
 def baseline_only_checkpoints(tmp_path_factory):
     """A baseline checkpoint from two steps of the project trainer; no ARM checkpoints."""
-    from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
-    from arm_reconstruction.train import train
 
     root = tmp_path_factory.mktemp("recon_data")
     write_box_dataset(root, "train", shards=1, per_shard=8, seed=0)

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+import trimesh
 from sensor_msgs.msg import JointState
 from shape_msgs.msg import Mesh, MeshTriangle
 
@@ -11,8 +12,6 @@ from arm_ros.conversions.poses import matrix_to_pose
 
 
 def _box_msg():
-    import trimesh
-
     box = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
     return mesh_to_msg(box.vertices, box.faces)
 
@@ -34,8 +33,6 @@ def test_objects_from_message_keep_good_ones_and_explain_bad_ones():
 
 
 def test_objects_larger_than_the_limit_are_dropped_with_their_size():
-    import trimesh
-
     huge = trimesh.creation.box(extents=(1e6, 1e6, 1e6))
     msg = ReconstructedObjectArray(table_height_m=0.0)
     msg.objects = [

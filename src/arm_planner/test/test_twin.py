@@ -1,8 +1,11 @@
+import mujoco
 import numpy as np
 import pytest
 import trimesh
 
+from arm_planner.mppi import STATE_SPEC
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, stabilize_servos, usable_parts
+from arm_sim import robot
 
 
 def _box_object(object_id, xyz, extents=(0.05, 0.05, 0.08), parts=True):
@@ -45,11 +48,6 @@ def test_signature_ignores_poses_but_not_geometry():
 
 
 def test_initial_state_places_robot_and_objects():
-    import mujoco
-
-    from arm_planner.mppi import STATE_SPEC
-    from arm_sim import robot
-
     twin = Twin([_box_object(1, (0, 0, 0.04))], 0.0, 0.01)
     T = np.eye(4)
     T[:3, 3] = (0.05, -0.05, 0.04)

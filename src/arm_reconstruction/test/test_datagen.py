@@ -1,8 +1,10 @@
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from arm_reconstruction import datagen
 from arm_reconstruction.dataset import VoxelDataset, unpack_bits, verify_manifest
+from arm_sim.objects import HELDOUT_CATEGORIES
 
 SETTINGS = dict(resolution=16, views_per_scene=2, objects_per_scene=(3, 4))
 
@@ -33,8 +35,6 @@ def test_shard_holds_consistent_samples(shard):
 
 
 def _dilate(occupancy):
-    from scipy import ndimage
-
     return np.stack([ndimage.binary_dilation(o, np.ones((3, 3, 3), bool)) for o in occupancy])
 
 
@@ -52,7 +52,6 @@ def test_generate_writes_manifest_and_resumes(tmp_path, shard):
 
 def test_test_split_uses_heldout_categories():
     shard = datagen.generate_shard(seed=0, split="test", resolution=16, views_per_scene=1, objects_per_scene=(3, 3))
-    from arm_sim.objects import HELDOUT_CATEGORIES
 
     assert set(shard["category"]) <= set(HELDOUT_CATEGORIES)
     with pytest.raises(ValueError):

@@ -3,6 +3,9 @@ import numpy as np
 from arm_core.camera import intrinsics, look_at, silhouette
 from arm_sim.camera import sample_camera_pose
 from arm_sim.depth_noise import DepthNoise, apply_depth_noise
+from arm_sim.objects import ObjectModel, box
+from arm_sim.scenes import PlacedObject, Scene
+from arm_sim.world import SimWorld
 
 
 def test_sampled_camera_poses_follow_the_benchmark_shell():
@@ -14,10 +17,6 @@ def test_sampled_camera_poses_follow_the_benchmark_shell():
 
 
 def test_silhouette_of_a_closed_box_matches_mujocos_rendering():
-    from arm_sim.objects import ObjectModel, box
-    from arm_sim.scenes import PlacedObject, Scene
-    from arm_sim.world import SimWorld
-
     part = box((0.1, 0.06, 0.08), (0.0, 0.0, 0.04))
     T = np.eye(4)
     T[:3, 3] = (0.05, 0.02, 0.0)

@@ -5,7 +5,16 @@ from arm_core.camera import look_at
 from arm_sim import robot
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import make_object, object_pool
-from arm_sim.scenes import PlacedObject, Scene, cluttered_scene, task_scene
+from arm_sim.scenes import (
+    TASK_TARGET_XY,
+    PlacedObject,
+    Scene,
+    _slide_into_range,
+    _visible_fraction,
+    cluttered_scene,
+    task_camera_pose,
+    task_scene,
+)
 from arm_sim.world import ROBOT_BASE_XY, SimWorld, build_world
 
 
@@ -70,8 +79,6 @@ def test_task_scene_reaches_the_requested_visibility():
 
 
 def test_an_occluder_that_hides_too_much_is_slid_sideways_into_the_visibility_bin():
-    from arm_sim.scenes import TASK_TARGET_XY, _slide_into_range, _visible_fraction, task_camera_pose
-
     rng = np.random.default_rng(0)
     camera = task_camera_pose()
     target, wall = make_object("box", rng), make_object("box", rng)
