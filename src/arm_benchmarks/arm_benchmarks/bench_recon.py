@@ -46,6 +46,7 @@ from arm_benchmarks.recon.plots import plot_by_visibility, plot_qualitative, plo
 from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
 from arm_benchmarks.recon.summary import summarise
+from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 
@@ -54,7 +55,9 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
     """Run (or resume) the benchmark and write its outputs; returns the summary."""
     started, started_cpu = time.perf_counter(), time.process_time()
     torch.set_num_threads(max(1, config.threads))
-    reconstructors, skipped, checkpoints = load_reconstructors(config.methods, config.checkpoint_dir)
+    reconstructors, skipped, checkpoints = load_reconstructors(
+        config.methods, config.checkpoint_dir, config.smoothing_iterations
+    )
     out = pathlib.Path(config.out)
     cache_dir = out / "cache" / config.result_key({c["path"] for c in checkpoints.values()})
     pool = []
@@ -126,6 +129,9 @@ def parse_args(argv=None) -> BenchConfig:
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument(
+        "--smoothing-iterations", type=int, default=DEFAULT_SMOOTHING_ITERATIONS, help="Taubin smoothing of meshes"
+    )
+    parser.add_argument(
         "--view",
         choices=("occluded", "random"),
         default=defaults.view,
@@ -163,6 +169,7 @@ def parse_args(argv=None) -> BenchConfig:
         stable_threshold_m=args.stable_threshold_m,
         depth_noise=not args.no_noise,
         domain=args.domain,
+        smoothing_iterations=args.smoothing_iterations,
         view=args.view,
         view_candidates=args.view_candidates,
         qualitative=args.qualitative,
@@ -184,8 +191,9 @@ def main(argv=None) -> int:
             continue
         chamfer = "-" if m["chamfer_m"] is None else f"{m['chamfer_m'] * 1000:.2f} mm"
         iou = "-" if m["iou"] is None else f"{m['iou']:.3f}"
+        normals = "-" if m.get("normal_consistency") is None else f"{m['normal_consistency']:.3f}"
         stable = "-" if m["stable_fraction"] is None else f"{m['stable_fraction']:.3f}"
-        print(f"  {name:22s} Chamfer {chamfer:>9s}  IoU {iou:>5s}  stable {stable}")
+        print(f"  {name:22s} Chamfer {chamfer:>9s}  normals {normals:>5s}  IoU {iou:>5s}  stable {stable}")
     return 0
 
 

@@ -18,6 +18,7 @@ from .grid import GridFrame
 
 DEFAULT_THRESHOLD = 0.5
 DEFAULT_MIN_COMPONENT_VOXELS = 4
+DEFAULT_SMOOTHING_ITERATIONS = 0
 MIN_CUT_VOLUME_M3 = 1e-9
 
 
@@ -139,9 +140,12 @@ def occupancy_mesh(
     threshold: float = DEFAULT_THRESHOLD,
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS,
     grid: np.ndarray | None = None,
+    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
 ) -> trimesh.Trimesh:
     """World-frame watertight mesh of the voxels whose probability exceeds threshold (empty mesh when
-    none do). The grid is zero-padded so that shapes touching the grid faces are closed there; the
+    none do). smoothing_iterations > 0: Taubin smoothing of the surface (volume-preserving: it takes
+    the voxel steps off without shrinking the shape), the base kept flat on the table.
+    The grid is zero-padded so that shapes touching the grid faces are closed there; the
     surface below the bottom layer's centres is flattened onto the table plane (grid z = 0), so that
     a shape standing on the table rests on it with a flat base. grid [4, d, d, d]: the object's
     four-channel grid; components apart from its observed voxels (F1) are dropped, then what is
@@ -162,6 +166,10 @@ def occupancy_mesh(
     padded = np.pad(probabilities, 1, constant_values=0.0)
     vertices, faces, _, _ = marching_cubes(padded, level=float(threshold), allow_degenerate=False)
     vertices = vertices - 0.5
+    if smoothing_iterations > 0:
+        voxel_mesh = trimesh.Trimesh(vertices, faces, process=False)
+        trimesh.smoothing.filter_taubin(voxel_mesh, lamb=0.5, nu=0.53, iterations=int(smoothing_iterations))
+        vertices = np.asarray(voxel_mesh.vertices)
     vertices[:, 2] = np.where(vertices[:, 2] < 0.5, 0.0, vertices[:, 2])
     vertices_world = frame.voxel_to_world(vertices)
     mesh = trimesh.Trimesh(vertices_world, faces[:, ::-1], process=True)

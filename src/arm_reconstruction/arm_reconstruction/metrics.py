@@ -6,6 +6,11 @@ d(p, Q) the Euclidean distance from p to its nearest point of Q,
     CD = 0.5 * ( mean_{a in A} d(a, B) + mean_{b in B} d(b, A) )      [metres],
 the symmetric mean of the two mean nearest-neighbour distances (not squared).
 
+Normal consistency (normal_consistency): with A sampled on the reconstruction as above and B on
+the true surface, the mean over a in A of |cos| between the face normal at a and the face normal at
+a's nearest point of B, as in the occupancy-network papers (1 = every reconstructed surface element
+faces as the true surface next to it; a lumpy blob scores low even where it is close).
+
 Volumetric IoU (volumetric_iou): both closed meshes are voxelized (voxel centres inside, ray
 parity, arm_reconstruction.grid.voxelize_mesh) in one cubic grid that encloses both meshes with a
 one-voxel margin, |A and B| / |A or B|.
@@ -24,6 +29,12 @@ DEFAULT_IOU_RESOLUTION = 64
 def sample_surface_points(mesh: trimesh.Trimesh, count: int, seed: int = 0) -> np.ndarray:
     """(count, 3) points uniformly distributed by area over the mesh's triangles (deterministic in
     seed). Raises ValueError for a mesh without area."""
+    return sample_surface(mesh, count, seed)[0]
+
+
+def sample_surface(mesh: trimesh.Trimesh, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(points (count, 3), unit face normals at them (count, 3)), uniformly by area (deterministic in
+    seed). Raises ValueError for a mesh without area."""
     if count < 1:
         raise ValueError(f"count must be >= 1, got {count}")
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
@@ -40,7 +51,9 @@ def sample_surface_points(mesh: trimesh.Trimesh, count: int, seed: int = 0) -> n
     r1 = np.sqrt(rng.random(int(count)))[:, None]
     r2 = rng.random(int(count))[:, None]
     a, b, c = triangles[chosen, 0], triangles[chosen, 1], triangles[chosen, 2]
-    return (1 - r1) * a + r1 * (1 - r2) * b + r1 * r2 * c
+    normals = np.cross(b - a, c - a)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-18)
+    return (1 - r1) * a + r1 * (1 - r2) * b + r1 * r2 * c, normals
 
 
 def directed_distances_m(points_from: np.ndarray, points_to: np.ndarray) -> np.ndarray:
@@ -60,6 +73,18 @@ def chamfer_distance_m(
     a_to_b = directed_distances_m(points_a, points_b).mean()
     b_to_a = directed_distances_m(points_b, points_a).mean()
     return float(0.5 * (a_to_b + b_to_a))
+
+
+def normal_consistency(
+    reconstructed: trimesh.Trimesh, truth: trimesh.Trimesh, samples: int = DEFAULT_CHAMFER_SAMPLES, seed: int = 0
+) -> float:
+    """Mean |cos| between the normal at each of `samples` points on the reconstructed surface and the
+    normal at its nearest point sampled on the true surface (0-1, higher is better). Raises ValueError
+    when a mesh has no surface."""
+    points, normals = sample_surface(reconstructed, samples, seed)
+    true_points, true_normals = sample_surface(truth, samples, seed)
+    _, nearest = cKDTree(true_points).query(points)
+    return float(np.mean(np.abs(np.einsum("ij,ij->i", normals, true_normals[nearest]))))
 
 
 def is_closed(mesh: trimesh.Trimesh) -> bool:

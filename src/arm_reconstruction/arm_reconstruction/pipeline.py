@@ -22,6 +22,7 @@ from .convex_parts import ConvexDecomposer, DecompositionSettings
 from .grid import DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
 from .meshing import (
     DEFAULT_MIN_COMPONENT_VOXELS,
+    DEFAULT_SMOOTHING_ITERATIONS,
     DEFAULT_THRESHOLD,
     add_missed_observed_voxels,
     empty_mesh,
@@ -97,6 +98,7 @@ class ReconstructionSettings:
     k: float = DEFAULT_K
     threshold: float = DEFAULT_THRESHOLD
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
+    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     remove_intersections: bool = True
     decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
     estimate_visibility: bool = True
@@ -244,6 +246,7 @@ class Reconstructor:
                     s.threshold,
                     1 if alone else s.min_component_voxels,
                     grid=g,
+                    smoothing_iterations=s.smoothing_iterations,
                 )
                 for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
             ]

@@ -7,6 +7,7 @@ from arm_reconstruction.metrics import (
     chamfer_distance_m,
     enclosing_grid,
     is_closed,
+    normal_consistency,
     sample_surface_points,
     volumetric_iou,
 )
@@ -82,3 +83,14 @@ def test_volumetric_iou_in_a_given_frame_and_errors():
         volumetric_iou(a, open_mesh)
     with pytest.raises(ValueError, match="both meshes are empty"):
         volumetric_iou(trimesh.Trimesh(), trimesh.Trimesh())
+
+
+def test_normal_consistency_is_one_for_the_same_surface_and_low_for_a_blob():
+    box = trimesh.creation.box((0.08, 0.08, 0.08))
+    assert normal_consistency(box, box) > 0.99
+    blob = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    score = normal_consistency(blob, box)
+    assert 0.5 < score < 0.95  # a sphere's normals agree with a box's only near the face centres
+    shifted = box.copy()
+    shifted.apply_translation((0.002, 0.0, 0.0))  # a small shift keeps the normals, except along the edges
+    assert normal_consistency(shifted, box) > 0.95 and chamfer_distance_m(shifted, box) > 0.0003

@@ -7,6 +7,7 @@ import pathlib
 
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_core.run_key import run_key
+from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS
 from arm_reconstruction.metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION
 from arm_sim.appearance import DEFAULT_DOMAIN
 
@@ -47,6 +48,7 @@ class BenchConfig:
     stable_threshold_m: float = 0.01
     depth_noise: bool = True
     domain: str = DEFAULT_DOMAIN
+    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4

@@ -57,9 +57,9 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         "",
         "## Overall",
         "",
-        "| method | objects | empty | Chamfer mm (90% CI) | median mm | IoU | stable fraction (90% CI) "
-        "| displacement cm, median / mean | s/scene |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| method | objects | empty | Chamfer mm (90% CI) | median mm | normal consistency | IoU "
+        "| stable fraction (90% CI) | displacement cm, median / mean | s/scene |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name in ok:
         m = methods[name]
@@ -73,7 +73,8 @@ def write_report(summary: dict, path: pathlib.Path, figures: list[str]) -> None:
         moved = f"{_fmt(m['displacement_m_median'], 100, 2)} / {_fmt(m['displacement_m_mean'], 100, 2)}"
         lines.append(
             f"| {name} | {m['n']} | {m['n_empty']} | {chamfer} | {_fmt(m.get('chamfer_m_median'), 1000, 2)} "
-            f"| {_fmt(m['iou'])} | {stable} | {moved} | {_fmt(m['seconds_per_scene'], 1, 1)} |"
+            f"| {_fmt(m.get('normal_consistency'))} | {_fmt(m['iou'])} | {stable} | {moved} "
+            f"| {_fmt(m['seconds_per_scene'], 1, 1)} |"
         )
     sim_parts = methods.get(GROUND_TRUTH, {}).get("simulator_parts")
     if sim_parts and sim_parts["stable_fraction"] is not None:

@@ -27,7 +27,7 @@ from arm_benchmarks.recon.scenes import (
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_reconstruction.grid import DEFAULT_RESOLUTION
-from arm_reconstruction.metrics import chamfer_distance_m, volumetric_iou
+from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency, volumetric_iou
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor, StageTimer, resolve_checkpoint_path
 from arm_segmentation.segmentation import segment
@@ -54,14 +54,14 @@ def file_digest(path) -> str:
     return hashlib.sha256(pathlib.Path(path).read_bytes()).hexdigest()
 
 
-def load_reconstructors(methods, checkpoint_dir: str = "") -> tuple[dict, dict, dict]:
+def load_reconstructors(methods, checkpoint_dir: str = "", smoothing_iterations: int = 0) -> tuple[dict, dict, dict]:
     """-> (name -> Reconstructor, name -> reason skipped, name -> checkpoint path and sha256). Methods
     sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods."""
     reconstructors, skipped, checkpoints, by_variant = {}, {}, {}, {}
     for name in methods:
         if name not in METHODS:
             continue
-        settings = ReconstructionSettings(method=name)
+        settings = ReconstructionSettings(method=name, smoothing_iterations=smoothing_iterations)
         if checkpoint_dir:
             path = pathlib.Path(checkpoint_dir) / f"{settings.variant}.pt"
             settings = dataclasses.replace(settings, checkpoint_path=str(path))
@@ -124,12 +124,15 @@ def _score_method(reconstructor, grids, labels, frame, truths: dict, match: dict
     for truth_id, truth in truths.items():
         obj = built.get(match.get(truth_id, -1))
         if obj is None:
-            entries[truth_id] = {"empty": True, "chamfer_m": None, "iou": 0.0, "displacement_m": None}
+            entries[truth_id] = {
+                "empty": True, "chamfer_m": None, "normal_consistency": None, "iou": 0.0, "displacement_m": None
+            }
             continue
         mesh = meshes[truth_id] = obj.world_mesh()
         entry = entries[truth_id] = {
             "empty": False,
             "chamfer_m": chamfer_distance_m(mesh, truth, config.chamfer_samples),
+            "normal_consistency": normal_consistency(mesh, truth, config.chamfer_samples),
             "displacement_m": moved.get(obj.id),
         }
         try:
@@ -154,6 +157,7 @@ def _score_ground_truth(scene, truth_ids, decomposition: DecompositionSettings, 
         i: {
             "empty": False,
             "chamfer_m": None,
+            "normal_consistency": None,
             "iou": None,
             "displacement_m": moved.get(i),
             "displacement_sim_parts_m": moved_sim_parts.get(i),

@@ -37,7 +37,9 @@ def _stats(entries: list[dict], threshold_m: float, geometric: bool) -> dict:
     if geometric:
         chamfer = [e["chamfer_m"] for e in entries if e["chamfer_m"] is not None]
         iou = [e["iou"] for e in entries if e["iou"] is not None]
+        normals = [e["normal_consistency"] for e in entries if e.get("normal_consistency") is not None]
         out |= {
+            "normal_consistency": none_if_nan(mean(normals)),
             "chamfer_m": none_if_nan(mean(chamfer)),
             "chamfer_m_median": none_if_nan(median(chamfer)),
             "chamfer_m_ci90": none_if_nan(bootstrap_interval(chamfer)),
@@ -47,7 +49,7 @@ def _stats(entries: list[dict], threshold_m: float, geometric: bool) -> dict:
             "n_iou_undefined": len(entries) - len(iou),
         }
     else:
-        out |= {"chamfer_m": None, "iou": None}
+        out |= {"chamfer_m": None, "normal_consistency": None, "iou": None}
     out |= {
         "stable_fraction": none_if_nan(rate(stable, len(entries))),
         "stable_ci90": none_if_nan(wilson_interval(stable, len(entries))),
