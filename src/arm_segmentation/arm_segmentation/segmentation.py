@@ -11,6 +11,7 @@ from scipy import ndimage
 
 from arm_core.camera import backproject_image, transform_points
 from arm_core.frames import FrameInputError, validate_frame
+from arm_segmentation.boundary import BorderParams, refine_borders
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import organized_normals, preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
@@ -43,13 +44,14 @@ class FineParams:
     contact_radius_px: int = 3
     small_fragment_px: int = 200
     min_contact_px: int = 6
+    gap_contact_px: int = 6
     min_fragment_px: int = 6
     flood_iterations: int = 24
     grow_radius_px: int = 3
 
     def cluster_params(self, cluster: ClusterParams) -> ClusterParams:
         names = ("step_px", "contact_radius_px", "small_fragment_px", "min_contact_px", "min_fragment_px")
-        names += ("flood_iterations", "grow_radius_px")
+        names += ("flood_iterations", "grow_radius_px", "gap_contact_px")
         return replace(cluster, **{name: getattr(self, name) for name in names})
 
 
@@ -76,6 +78,7 @@ class SegmentationParams:
     refine: RefineParams = field(default_factory=RefineParams)
     fine: FineParams = field(default_factory=FineParams)
     occluders: OccluderParams = field(default_factory=OccluderParams)
+    border: BorderParams = field(default_factory=BorderParams)
 
 
 @dataclass
@@ -249,6 +252,7 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     labels = trim_missing_rim(labels, depth_full, rgb_full, params.missing_rim_close_px, params.rim_window_px)
     if params.fill_enclosed_missing:
         labels = fill_enclosed_missing(labels, depth_full)
+    labels = refine_borders(labels, rgb_full, params.border)
     taken = labels[::stride, ::stride] > 0
     occluders = near_occluders(taken, stage.smoothed, rgb, stage.table, K, T, stage.levels, params.occluders)
     if np.any(occluders):
