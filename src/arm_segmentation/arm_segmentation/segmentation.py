@@ -39,6 +39,7 @@ class FineParams:
     max_pixels: int = 150_000  # larger crops are clustered on the working grid
     margin_px: int = 12
     candidate_radius_px: int = 4
+    missing_candidate_radius_px: int = 8  # pixels without depth (dark, shiny surfaces) reach further
     table_colour_window_px: int = 31
     step_px: int = 3
     contact_radius_px: int = 3
@@ -68,10 +69,12 @@ class SegmentationParams:
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
     rim_window_px: int = 9
     fill_enclosed_missing: bool = True
+    fill_closed_missing_px: int = 6  # pixels without depth in this closing of the instances join them (0: off)
     smooth_sigma_m: float = 0.01
     table_colour_threshold: float = 0.1
     candidate_radius_px: int = 4
     table_colour_window_px: int = 15
+    missing_candidate_radius_px: int = 4
     extend_table_to_camera: bool = True  # the largest level's footprint reaches under the camera
     table: TableParams = field(default_factory=TableParams)
     cluster: ClusterParams = field(default_factory=ClusterParams)
@@ -157,18 +160,23 @@ def missing_over_table(depth_m, K, T, levels, params: OccluderParams) -> np.ndar
     return out
 
 
-def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int, radius_px: int) -> _Stage:
-    """Adds chromaticity, the local table colour and the candidate mask (pixels in the table band,
-    or without depth over the table, near objects whose colour is not the table's)."""
+def _near(mask: np.ndarray, radius_px: int) -> np.ndarray:
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
+    return cv2.dilate(mask.astype(np.uint8), disk) > 0
+
+
+def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int, radii_px: tuple[int, int]) -> _Stage:
+    """Adds chromaticity, the local table colour and the candidate mask (pixels in the table band
+    within radii_px[0] of objects, or without depth over the table within radii_px[1], whose colour
+    is not the table's)."""
     stage.chroma = chromaticity(rgb)
     stage.candidates = np.zeros_like(stage.objects)
     if np.any(stage.table) and np.any(stage.objects):
         stage.table_chroma = local_table_chroma(stage.chroma, stage.table, window_px)
         not_table_colour = hue_distance(stage.chroma, stage.table_chroma) > params.table_colour_threshold
-        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
-        near_objects = cv2.dilate(stage.objects.astype(np.uint8), disk) > 0
         missing = missing_over_table(stage.smoothed, K, T, stage.levels, params.occluders)
-        stage.candidates = near_objects & not_table_colour & (stage.table | missing)
+        in_band = stage.table & _near(stage.objects, radii_px[0])
+        stage.candidates = not_table_colour & (in_band | (missing & _near(stage.objects, radii_px[1])))
     return stage
 
 
@@ -233,14 +241,15 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         support = upsample(stage.support[y0 // stride :, x0 // stride :], stride, depth_full.shape)
         support = support[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
-        window_px, radius_px = params.fine.table_colour_window_px, params.fine.candidate_radius_px
-        _colour(fine, rgb_full[crop], K_crop, T, params, window_px, radius_px)
+        radii_px = params.fine.candidate_radius_px, params.fine.missing_candidate_radius_px
+        _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, radii_px)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
         labels[crop] = _cluster(fine, cluster, params)
         table = upsample(stage.table, stride, depth_full.shape)
         table[crop] = fine.table
     else:
-        _colour(stage, rgb, K, T, params, params.table_colour_window_px, params.candidate_radius_px)
+        radii_px = params.candidate_radius_px, params.missing_candidate_radius_px
+        _colour(stage, rgb, K, T, params, params.table_colour_window_px, radii_px)
         labels = _cluster(stage, params.cluster, params)
         table = stage.table
         if stride > 1:
@@ -249,6 +258,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
                 params.table, params.refine, missing_over_table(depth_full, K_full, T, stage.levels, params.occluders),
             )  # fmt: skip
             table = upsample(table, stride, depth_full.shape)
+    if params.fill_closed_missing_px > 0:
+        labels = fill_enclosed_missing(labels, depth_full, params.fill_closed_missing_px)
     labels = trim_missing_rim(labels, depth_full, rgb_full, params.missing_rim_close_px, params.rim_window_px)
     if params.fill_enclosed_missing:
         labels = fill_enclosed_missing(labels, depth_full)
@@ -264,15 +275,21 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 
-def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int = 0) -> np.ndarray:
     """Labels with the pixels without depth that the instances enclose (dropout blobs on dark and
-    shiny objects) given to the nearest instance."""
+    shiny objects), or that their closing by a disc of radius close_px covers, given to the
+    nearest instance."""
     ys, xs = np.nonzero(labels)
     if len(ys) == 0:
         return labels
-    box = slice(ys.min(), ys.max() + 1), slice(xs.min(), xs.max() + 1)
+    m = close_px + 1
+    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     crop = labels[box]
-    holes = ndimage.binary_fill_holes(crop > 0) & (crop == 0) & (depth_m[box] <= 0)
+    inside = ndimage.binary_fill_holes(crop > 0)
+    if close_px > 0:
+        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
+        inside |= cv2.morphologyEx((crop > 0).astype(np.uint8), cv2.MORPH_CLOSE, disk) > 0
+    holes = inside & (crop == 0) & (depth_m[box] <= 0)
     if not np.any(holes):
         return labels
     _, (iy, ix) = ndimage.distance_transform_edt(crop == 0, return_indices=True)

@@ -1,0 +1,41 @@
+"""Pixels without depth on the objects' outlines and in their notches (fill_enclosed_missing)."""
+
+import numpy as np
+
+from arm_segmentation.segmentation import fill_enclosed_missing
+
+
+def _notched_square():
+    """A 30x30 instance with a 4 px wide notch cut into its right side, and the depth image."""
+    labels = np.zeros((60, 60), dtype=np.uint16)
+    labels[15:45, 15:45] = 1
+    labels[28:32, 35:45] = 0
+    depth = np.ones((60, 60), dtype=np.float32)
+    return labels, depth
+
+
+def test_notch_without_depth_is_filled_by_the_closing():
+    labels, depth = _notched_square()
+    depth[28:32, 35:45] = 0.0
+    assert np.array_equal(fill_enclosed_missing(labels, depth), labels)  # not enclosed
+    filled = fill_enclosed_missing(labels, depth, close_px=6)
+    assert np.all(filled[28:32, 35:45] == 1)
+    assert np.count_nonzero(filled) == 30 * 30
+
+
+def test_notch_with_depth_and_the_background_stay_unlabelled():
+    labels, depth = _notched_square()
+    depth[:, 50:] = 0.0  # no depth beyond the object, out of the closing's reach
+    filled = fill_enclosed_missing(labels, depth, close_px=6)
+    assert np.array_equal(filled, labels)
+
+
+def test_enclosed_hole_goes_to_the_surrounding_instance():
+    labels = np.zeros((40, 40), dtype=np.uint16)
+    labels[5:35, 5:20] = 1
+    labels[5:35, 20:35] = 2
+    labels[15:20, 8:14] = 0
+    depth = np.ones((40, 40), dtype=np.float32)
+    depth[15:20, 8:14] = 0.0
+    filled = fill_enclosed_missing(labels, depth)
+    assert np.all(filled[15:20, 8:14] == 1)
