@@ -64,7 +64,12 @@ class SegmentationNode(Node):
         )
         stride = declare(self, "working_stride", 2, "Subsampling of the working grid (1 = full resolution)", 1, 4)
         min_table = declare(
-            self, "min_table_area_m2", 0.08, "Smallest horizontal plane taken as a table, m^2", 0.005, 10.0
+            self,
+            "min_table_area_m2",
+            TableParams().min_table_area_m2,
+            "Smallest horizontal plane taken as a table, m^2",
+            0.005,
+            10.0,
         )
         max_height = declare(self, "max_object_height_m", 0.6, "Tallest object above its table, metres", 0.02, 3.0)
         min_area = declare(self, "min_instance_area_m2", 3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
