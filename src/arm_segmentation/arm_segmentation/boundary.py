@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 
 @dataclass(frozen=True)
@@ -21,6 +20,16 @@ class BorderParams:
     band_px: int = 2  # pixels this near an outline are decided anew
     blur_px: int = 3  # box filter of the colour samples
     margin: float = 0.0  # a band pixel becomes object when d_object + margin < d_background
+
+
+def nearest_pixel(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) HxW int arrays: for every pixel, a nearest pixel of the non-empty HxW bool mask
+    (OpenCV's 5x5 distance transform: a few times faster than an exact one, and exact this near)."""
+    _, index = cv2.distanceTransformWithLabels(
+        (~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE, labelType=cv2.DIST_LABEL_PIXEL
+    )
+    ys, xs = np.nonzero(mask)  # row-major, the order OpenCV numbers the mask's pixels in
+    return ys[index - 1], xs[index - 1]
 
 
 def refine_borders(labels: np.ndarray, rgb: np.ndarray, params: BorderParams = BorderParams()) -> np.ndarray:
@@ -46,8 +55,8 @@ def _refine(labels: np.ndarray, rgb: np.ndarray, params: BorderParams) -> np.nda
         return labels
     colour = cv2.blur(rgb, (params.blur_px, params.blur_px)).astype(np.float32) if params.blur_px > 1 else rgb
     colour = np.asarray(colour, dtype=np.float32)
-    _, (iy, ix) = ndimage.distance_transform_edt(~inside, return_indices=True)
-    _, (oy, ox) = ndimage.distance_transform_edt(~outside, return_indices=True)
+    iy, ix = nearest_pixel(inside)
+    oy, ox = nearest_pixel(outside)
     ys, xs = np.nonzero(band)
     pixel = rgb[ys, xs].astype(np.float32)
     to_object = np.abs(pixel - colour[iy[ys, xs], ix[ys, xs]]).sum(axis=1)

@@ -11,7 +11,7 @@ from scipy import ndimage
 
 from arm_core.camera import backproject_image, transform_points
 from arm_core.frames import FrameInputError, validate_frame
-from arm_segmentation.boundary import BorderParams, refine_borders
+from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import organized_normals, preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
@@ -292,7 +292,7 @@ def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int
     holes = inside & (crop == 0) & (depth_m[box] <= 0)
     if not np.any(holes):
         return labels
-    _, (iy, ix) = ndimage.distance_transform_edt(crop == 0, return_indices=True)
+    iy, ix = nearest_pixel(crop > 0)
     out = labels.copy()
     out[box] = np.where(holes, crop[iy, ix], crop)
     return out

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from arm_segmentation.boundary import BorderParams, refine_borders
+from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
 
 
 def _scene():
@@ -31,3 +32,15 @@ def test_no_instances_or_zero_band_leave_labels_unchanged():
     empty = np.zeros_like(truth)
     assert np.array_equal(refine_borders(empty, rgb), empty)
     assert np.array_equal(refine_borders(truth, rgb, BorderParams(band_px=0)), truth)
+
+
+def test_nearest_pixel_is_a_nearest_mask_pixel():
+    rng = np.random.default_rng(3)
+    mask = rng.random((50, 70)) < 0.02
+    rows, cols = nearest_pixel(mask)
+    assert np.all(mask[rows, cols])
+    exact, _ = ndimage.distance_transform_edt(~mask, return_indices=True)
+    found = np.hypot(rows - np.arange(50)[:, None], cols - np.arange(70)[None, :])
+    near = exact <= 3
+    assert np.allclose(found[near], exact[near])
+    assert np.all(found <= exact + 1.0)
