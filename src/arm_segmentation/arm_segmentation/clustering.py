@@ -36,7 +36,6 @@ class ClusterParams:
     small_fragment_px: int = 100
     small_fragment_tolerance: float = 1.6
     min_contact_px: int = 3
-    gap_contact_px: int = 3  # contacts through pixels without depth that merge two fragments of one colour
     min_fragment_px: int = 3
     min_instance_area_m2: float = 3e-4
     flood_iterations: int = 20
@@ -202,7 +201,7 @@ def _union(n: int, pairs: np.ndarray) -> np.ndarray:
 
 def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
     continuous, broken, unknown = counts[:, 0], counts[:, 1], counts[:, 2]
-    across_gap = (unknown >= params.gap_contact_px) & (broken <= continuous)
+    across_gap = (unknown >= params.min_contact_px) & (broken <= continuous)
     return ((continuous >= params.min_contact_px) & (continuous >= broken)) | across_gap
 
 

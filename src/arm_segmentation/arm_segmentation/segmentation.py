@@ -45,14 +45,13 @@ class FineParams:
     contact_radius_px: int = 3
     small_fragment_px: int = 200
     min_contact_px: int = 6
-    gap_contact_px: int = 6
     min_fragment_px: int = 6
     flood_iterations: int = 24
     grow_radius_px: int = 3
 
     def cluster_params(self, cluster: ClusterParams) -> ClusterParams:
         names = ("step_px", "contact_radius_px", "small_fragment_px", "min_contact_px", "min_fragment_px")
-        names += ("flood_iterations", "grow_radius_px", "gap_contact_px")
+        names += ("flood_iterations", "grow_radius_px")
         return replace(cluster, **{name: getattr(self, name) for name in names})
 
 
