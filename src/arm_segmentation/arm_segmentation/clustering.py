@@ -39,7 +39,7 @@ class ClusterParams:
     min_fragment_px: int = 3
     min_instance_area_m2: float = 3e-4
     flood_iterations: int = 20
-    flood_chroma_threshold: float = 0.45
+    flood_chroma_threshold: float = 0.6
     flood_strict_chroma_threshold: float = 0.25  # first flood pass: fragments claim their own colour (0: off)
     grow_radius_px: int = 3
     grow_chroma_threshold: float = 0.12
