@@ -17,6 +17,7 @@ PERF_MEASUREMENTS = (
     ("arm_benchmarks.perf_reconstruction", "measure"),
     ("arm_reconstruction.training.measure", "measure_training"),
     ("arm_benchmarks.perf_planner", "measure"),
+    ("arm_benchmarks.perf_planner_graph", "measure"),  # the graph under load, minutes
 )
 
 

@@ -4,8 +4,11 @@ Subscribes /arm/meshes (reliable, transient-local) and /joint_states and keeps o
 each. One goal is served at a time; a goal arriving while another plans is rejected. Every refusal
 (no meshes, unknown target, degenerate mesh, goal out of reach, non-finite joint states, twin
 compilation failure, planning error) aborts the goal with the reason in the result; the node keeps
-serving. With replan_period_s > 0 the plan is executed in chunks of that length and re-planned from
-the newest joint states and meshes after each chunk (closed loop).
+serving. With stream:=true (open loop) the controller executes the plan while it is being planned
+(receding horizon, streaming.TrajectoryStream): the first part once stream_lead_s of motion is planned,
+the rest in parts every stream_period_s. With replan_period_s > 0 the plan is executed in chunks of
+that length and re-planned from the newest joint states and meshes after each chunk (closed loop).
+/diagnostics reports the real-time factor of the last plan (planning wall time / planned motion).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg,
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
 from arm_planner.session import ManipulationSession, Outcome
+from arm_planner.streaming import TrajectoryStream
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
 from arm_ros.conversions import ConversionError
 
@@ -50,6 +54,12 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
     config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
+    config.rest_creeping_every_step = declare(
+        node, "rest_creeping_every_step", True, "Put creeping objects the robot does not touch to rest every step"
+    )
+    config.merge_other_objects = declare(
+        node, "merge_other_objects", True, "Cheaper twin: every object but the target as one convex hull"
+    )
     task_steps = {
         task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
         for task, steps in DEFAULT_TASK_STEPS.items()
@@ -68,6 +78,11 @@ class PlanNode(Node):
         self.replan_period_s = declare(
             self, "replan_period_s", 0.0, "Closed loop: execute this long, then re-plan (0: open loop)", 0.0, 60.0
         )
+        self.stream = declare(self, "stream", True, "Open loop: execute the plan while planning the rest")
+        self.stream_lead_s = declare(
+            self, "stream_lead_s", 0.5, "Stream: motion planned before the first part, s", 0.0, 60.0
+        )
+        self.stream_period_s = declare(self, "stream_period_s", 0.2, "Stream: motion planned per part, s", 0.0, 60.0)
         self.max_replans = declare(self, "max_replans", 10, "Closed loop: re-plans per goal at most", 0, 1000)
         self.feedback_every = declare(self, "feedback_every_steps", 10, "Publish feedback every N steps", 1, 1000)
         self.joint_state_timeout_s = declare(
@@ -86,8 +101,7 @@ class PlanNode(Node):
         self._joint_error = ""
         self._busy = False
         self.goals = self.refusals = self.meshes_received = self.meshes_rejected = 0
-        self.last_step_ms = float("nan")
-        self.last_plan_s = float("nan")
+        self.plan_figures = {}  # timing of the last plan, for /diagnostics
 
         inputs = MutuallyExclusiveCallbackGroup()
         self.create_subscription(
@@ -158,7 +172,16 @@ class PlanNode(Node):
             return None, f"joint states are older than {self.joint_state_timeout_s} s", objects
         return joints, "", objects
 
-    def _plan_once(self, goal_handle, task: str, goal, resume: tuple | None, start_com) -> Outcome:
+    def _stream_part(self, stream: TrajectoryStream, joint_names) -> None:
+        part = stream.part(1e-9 * self.get_clock().now().nanoseconds)
+        if part is not None and self.execute_plans:
+            msg = trajectory_msg(joint_names, part.times_s, part.positions)
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.pub_trajectory.publish(msg)
+
+    def _plan_once(
+        self, goal_handle, task: str, goal, resume: tuple | None, start_com, stream: TrajectoryStream | None = None
+    ) -> Outcome:
         joints, problem, objects = self._robot_state()
         if problem:
             return Outcome(False, problem)
@@ -172,6 +195,13 @@ class PlanNode(Node):
                 feedback.step, feedback.total_steps, feedback.state = step, total, state
                 feedback.predicted_error_m = float(error_m)
                 goal_handle.publish_feedback(feedback)
+
+        joint_names = self.session.robot.trajectory_joint_names
+
+        def on_control(position: np.ndarray) -> None:
+            stream.add(position)
+            if stream.due():
+                self._stream_part(stream, joint_names)
 
         displacement = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
         started = time.perf_counter()
@@ -187,10 +217,26 @@ class PlanNode(Node):
             start_com_world=start_com,
             resume_state=resume[0] if resume else None,
             resume_steps_in_state=resume[1] if resume else 0,
+            stream=on_control if stream is not None else None,
         )
-        self.last_plan_s = time.perf_counter() - started
+        plan_s = time.perf_counter() - started
+        if stream is not None:
+            self._stream_part(stream, joint_names)  # the rest of the plan
         if outcome.result is not None and len(outcome.result.step_ms):
-            self.last_step_ms = float(np.median(outcome.result.step_ms))
+            result = outcome.result
+            motion_s = float(result.times_s[-1]) if len(result.times_s) else float("nan")
+            self.plan_figures = {
+                "last_plan_s": plan_s,
+                "last_motion_s": motion_s,
+                "realtime_factor": plan_s / motion_s,
+                "mppi_steps_last": len(result.step_ms),
+                "mppi_step_ms_last": float(result.step_ms[-1]),
+                "mppi_step_ms_median": float(np.median(result.step_ms)),
+                "mppi_step_ms_p90": float(np.percentile(result.step_ms, 90)),
+                "mppi_step_cpu_ms_median": float(np.median(result.step_cpu_ms)),
+                "stream_parts": stream.parts if stream is not None else 0,
+                "stream_stall_s": stream.stall_s if stream is not None else 0.0,
+            }
         return outcome
 
     def _publish(self, outcome: Outcome, count: int | None = None) -> JointTrajectory:
@@ -242,6 +288,13 @@ class PlanNode(Node):
         return result
 
     def _run(self, goal_handle, task: str, goal):
+        if self.replan_period_s <= 0 and self.stream:
+            stream = TrajectoryStream(self.session.config.mppi.control_dt_s, self.stream_lead_s, self.stream_period_s)
+            outcome = self._plan_once(goal_handle, task, goal, None, None, stream)
+            if not outcome.planned:
+                return outcome, JointTrajectory()
+            result = outcome.result
+            return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
         outcome = self._plan_once(goal_handle, task, goal, None, None)
         if not outcome.planned or self.replan_period_s <= 0:
             return outcome, (self._publish(outcome) if outcome.planned else JointTrajectory())
@@ -283,9 +336,7 @@ class PlanNode(Node):
             "twin_builds": self.session.twin_builds,
             "meshes_received": self.meshes_received,
             "meshes_rejected": self.meshes_rejected,
-            "last_mppi_step_ms": self.last_step_ms,
-            "last_plan_s": self.last_plan_s,
-        }
+        } | self.plan_figures
         level = DiagnosticStatus.OK if objects else DiagnosticStatus.WARN
         message = "ok" if objects else "waiting for /arm/meshes"
         self.pub_diag.publish(diagnostics_msg(self, "planner", values, level, message))

@@ -81,6 +81,13 @@ class PlannerConfig:
     task_steps: dict = field(default_factory=lambda: dict(DEFAULT_TASK_STEPS))
     # Let resting objects sleep in the twin (no collision work until touched); see mppi.set_sleep.
     sleep_objects: bool = True
+    # Every step, objects creeping slower than 2 cm/s that the robot does not touch are put to rest
+    # (velocity zeroed, sleeping in the rollouts): reconstructed objects resting against each other
+    # otherwise jitter awake, and their contacts cost most of every rollout.
+    rest_creeping_every_step: bool = False
+    # Cheaper twin: every object but the target is one convex hull (its parts merged); their part-part
+    # contacts in a pile of reconstructed objects otherwise cost most of every rollout.
+    merge_other_objects: bool = False
     # Physics time the twin is settled for (robot holding still) before planning.
     settle_s: float = 0.3
     # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
@@ -111,6 +118,9 @@ Feedback = Callable[[int, int, str, float], None]
 # Closed loop: called after every executed control step with (step, control, twin model, twin data);
 # returns True when it overwrote the twin's qpos/qvel with an observation of the real state.
 Observe = Callable[[int, np.ndarray, mujoco.MjModel, mujoco.MjData], bool]
+# Receding horizon: called with the trajectory joints' targets of every executed control step, as it is
+# planned (see streaming.TrajectoryStream).
+Stream = Callable[[np.ndarray], None]
 
 
 def resume_point(states: list[str], executed_steps: int) -> tuple[str, int]:
@@ -139,29 +149,47 @@ class Planner:
         free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         self._object_qpos = np.array([model.jnt_qposadr[j] + k for j in free for k in range(7)], dtype=int)
         self._object_dofs = np.array([model.jnt_dofadr[j] + k for j in free for k in range(6)], dtype=int)
+        self._object_roots = model.body_rootid[model.jnt_bodyid[free]] if free else np.zeros(0, dtype=int)
+        self._robot_root = int(model.body_rootid[self.robot.tcp_body])
 
     def close(self) -> None:
         self.mppi.close()
 
-    def _stop_creeping(self, data: mujoco.MjData) -> None:
-        """Zero the velocity of objects creeping slower than 2 cm/s and 0.2 rad/s (contact jitter).
+    def _touching_robot(self, data: mujoco.MjData) -> np.ndarray:
+        """Per object: in contact with the robot now."""
+        n = data.ncon
+        roots = self.model.body_rootid[
+            self.model.geom_bodyid[np.stack([data.contact.geom1[:n], data.contact.geom2[:n]])]
+        ]
+        touching = roots[:, (roots == self._robot_root).any(axis=0)]
+        return np.isin(self._object_roots, touching)
 
-        Applied once, after the twin settled: such an object would otherwise stay awake and wake
-        every object it touches in every rollout; at rest it sleeps until something pushes it.
+    def _stop_creeping(self, data: mujoco.MjData, spare_touched: bool = False) -> bool:
+        """Zero the velocity of objects creeping slower than 2 cm/s and 0.2 rad/s (contact jitter);
+        True when it zeroed any. spare_touched: leave objects the robot touches alone.
+
+        Such an object would otherwise stay awake and wake every object it touches in every rollout;
+        at rest it sleeps until something pushes it.
         """
         if len(self._object_dofs) == 0:
-            return
+            return False
         qvel = data.qvel[self._object_dofs].reshape(-1, 6)
         creeping = (np.linalg.norm(qvel[:, :3], axis=1) < 0.02) & (np.linalg.norm(qvel[:, 3:], axis=1) < 0.2)
+        creeping &= np.any(qvel != 0.0, axis=1)
+        if spare_touched:
+            creeping &= ~self._touching_robot(data)
+        if not creeping.any():
+            return False
         qvel[creeping] = 0.0
         data.qvel[self._object_dofs] = qvel.reshape(-1)
+        return True
 
-    def _rest_objects_here(self, data: mujoco.MjData) -> None:
+    def _rest_objects_here(self, data: mujoco.MjData, spare_touched: bool = False) -> None:
         """Objects at rest in `data` sleep there in the rollouts: MuJoCo initialises sleeping islands at
         qpos0, so qpos0 takes their current poses (every rollout path starts from reset data)."""
         if self.config.sleep_objects:
             self.model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
-            self._stop_creeping(data)
+            self._stop_creeping(data, spare_touched)
         mujoco.mj_forward(self.model, data)
 
     def _reward(self, request: PlanRequest, geometry: TargetGeometry):
@@ -239,6 +267,7 @@ class Planner:
         feedback: Feedback | None = None,
         should_stop: Callable[[], bool] | None = None,
         observe: Observe | None = None,
+        stream: Stream | None = None,
     ) -> PlanResult:
         """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open.
         With `observe`, each executed step can be corrected by the real state (closed loop)."""
@@ -282,9 +311,13 @@ class Planner:
                 break
             if observe is not None and observe(step, ctrl, model, data):
                 self._rest_objects_here(data)
+            elif cfg.sleep_objects and cfg.rest_creeping_every_step and self._stop_creeping(data, spare_touched=True):
+                self._rest_objects_here(data, spare_touched=True)
             executed = get_state(model, data)
             states.append(reward.update(executed))
             controls.append(ctrl.copy())
+            if stream is not None:
+                stream(ctrl[robot.actuators])
             self.mppi.shift()
             met, error = self.evaluate(reward, request.task, executed, request.tolerance_m)
             holding = request.task == TASK_PUSH or reward.state == "grasped"

@@ -8,9 +8,10 @@ ends as an Outcome with a reason instead of an exception.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+import trimesh
 
 from arm_planner.planner import (
     DEFAULT_TOLERANCE_M,
@@ -20,6 +21,7 @@ from arm_planner.planner import (
     PlannerConfig,
     PlanRequest,
     PlanResult,
+    Stream,
 )
 from arm_planner.rewards import TASK_GRASP, TASKS
 from arm_planner.robot_spec import RobotSpec
@@ -54,6 +56,21 @@ def refused(message: str) -> Outcome:
     return Outcome(False, message)
 
 
+def merged_hull(obj: TwinObject) -> TwinObject:
+    """The object with its convex parts (or, without parts, its mesh) merged into one convex hull."""
+    if obj.convex_parts:
+        vertices = np.concatenate([p.vertices for p in obj.convex_parts])
+    elif obj.mesh is not None and len(obj.mesh.vertices) >= 4:
+        vertices = obj.mesh.vertices
+    else:
+        return obj
+    try:
+        hull = trimesh.Trimesh(vertices).convex_hull
+    except (RuntimeError, ValueError):  # degenerate (flat) point sets: qhull's error; keep the parts
+        return obj
+    return replace(obj, convex_parts=[hull])
+
+
 class ManipulationSession:
     """Holds the latest objects, a twin and a planner (rebuilt only when the geometry changes)."""
 
@@ -83,13 +100,19 @@ class ManipulationSession:
             self.planner.close()
             self.planner = None
 
-    def _ensure_twin(self) -> None:
-        signature = geometry_signature(self.objects, self.table_height_m)
+    def _twin_objects(self, target_id: int) -> list[TwinObject]:
+        if not self.config.merge_other_objects:
+            return self.objects
+        return [o if o.id == target_id or len(o.convex_parts) == 1 else merged_hull(o) for o in self.objects]
+
+    def _ensure_twin(self, target_id: int) -> None:
+        objects = self._twin_objects(target_id)
+        signature = geometry_signature(objects, self.table_height_m)
         if self.twin is not None and self.twin.signature == signature:
             return
         self.close()
         self.twin = None
-        self.twin = Twin(self.objects, self.table_height_m, self.twin_timestep_s, self.robot)
+        self.twin = Twin(objects, self.table_height_m, self.twin_timestep_s, self.robot)
         self.planner = Planner(self.twin.model, self.robot, self.config)
         self.twin_builds += 1
 
@@ -119,6 +142,7 @@ class ManipulationSession:
         resume_state: str | None = None,
         resume_steps_in_state: int = 0,
         observe: Observe | None = None,
+        stream: Stream | None = None,
     ) -> Outcome:
         """Plan `task` on object `target_id` from the given robot state; never raises on bad input."""
         if task not in TASKS:
@@ -141,7 +165,7 @@ class ManipulationSession:
         if target_id not in known:
             return refused(f"unknown target id {target_id}; known ids {known}")
         try:
-            self._ensure_twin()
+            self._ensure_twin(target_id)
         except TwinError as error:
             return refused(str(error))
         twin = self.twin
@@ -168,7 +192,13 @@ class ManipulationSession:
         try:
             state = twin.initial_state(arm_q, float(gripper_opening_m), poses)
             result = self.planner.plan(
-                state, plan_request, geometry, feedback=feedback, should_stop=should_stop, observe=observe
+                state,
+                plan_request,
+                geometry,
+                feedback=feedback,
+                should_stop=should_stop,
+                observe=observe,
+                stream=stream,
             )
         except (ValueError, FloatingPointError, RuntimeError) as error:
             return Outcome(False, f"planning failed: {error}", skipped=dict(twin.skipped))
