@@ -30,7 +30,8 @@ from arm_ros.conversions.poses import pose_to_matrix
 from arm_ros.processes import NodeProcess
 
 SHOULDER_WORLD_M = np.array([-0.55, 0.0, 0.333])
-TASKS = {"grasp": (0, (0.0, 0.0, 0.0)), "push": (1, (0.05, -0.30, 0.0)), "rearrange": (2, (0.20, 0.20, 0.0))}
+# task -> (Manipulate task number, goal displacement m); the rearrange goal lies towards the robot, in reach
+TASKS = {"grasp": (0, (0.0, 0.0, 0.0)), "push": (1, (0.05, -0.30, 0.0)), "rearrange": (2, (-0.15, -0.10, 0.0))}
 DIAG_KEYS = (
     "realtime_factor",
     "last_plan_s",
@@ -129,6 +130,11 @@ def _serve(client: GraphClient, task: str, targets: list[int], processes: dict) 
     for target in list(targets):
         before = {k: cpu_s(p.pid) for k, p in processes.items()}
         row = client.goal(task, target)
+        for _ in range(20):  # a freshly started plan_node may not have heard the sim yet
+            if not row.get("message", "").startswith(("no joint states", "no reconstructed objects")):
+                break
+            client.spin_until(lambda: False, 1.0)
+            row = client.goal(task, target)
         if "error" not in row and row["motion_s"] > 0:
             targets.remove(target)
             row |= {"task": task, "target_id": target, "load_average": os.getloadavg()[0]}
@@ -155,7 +161,7 @@ def run_seed(seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClie
     processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=sim_time)
     rows = []
     try:
-        client.meshes = None
+        client.meshes, client.planner_diag = None, {}
         if not client.spin_until(lambda: client.meshes is not None and client.meshes.objects, 400.0):
             return {"seed": seed, "error": "no /arm/meshes in time"}
         client.client.wait_for_server(timeout_sec=60.0)

@@ -46,8 +46,8 @@ class TrajectoryStream:
 
     def due(self) -> bool:
         if self.sent_at_s is None:
-            return self.planned_s >= self.lead_s and len(self.positions) > 0
-        return self.planned_s - self.sent_end_s >= max(self.period_s, self.control_dt_s / 2)
+            return self.planned_s >= self.lead_s - 1e-9 and len(self.positions) > 0
+        return self.planned_s - self.sent_end_s >= max(self.period_s, self.control_dt_s / 2) - 1e-9
 
     def part(self, now_s: float) -> StreamPart | None:
         """The part to send at clock time `now_s` (every planned point not executed yet); None when

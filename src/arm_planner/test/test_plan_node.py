@@ -121,3 +121,38 @@ def test_closed_loop_replanning_executes_in_chunks(graph):
     chunks = received[before:]
     assert [len(c.points) for c in chunks[:2]] == [2, 2]
     assert len(result.trajectory.points) == sum(len(c.points) for c in chunks)
+
+
+def _plan_index(positions, part):
+    """Where the part's points start in the plan (they must be a contiguous run of it)."""
+    points = np.array([p.positions for p in part.points])
+    for k in range(len(positions) - len(points) + 1):
+        if np.allclose(positions[k : k + len(points)], points):
+            return k
+    raise AssertionError("a streamed part is not a run of the plan")
+
+
+def test_streamed_parts_join_into_the_plan(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    node.stream_lead_s, node.stream_period_s = 0.04, 0.04
+    try:
+        before = len(received)
+        result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    finally:
+        node.stream_lead_s, node.stream_period_s = 0.5, 0.2
+    positions = np.array([p.positions for p in result.trajectory.points])
+    assert len(positions) == 5, result.message
+    deadline = time.monotonic() + 5
+    while len(received) - before < 3:
+        assert time.monotonic() < deadline, "expected the plan in three parts (lead 2 steps, then 2, then 1)"
+        time.sleep(0.05)
+    parts = received[before:]
+    starts = [_plan_index(positions, part) for part in parts]
+    assert starts[0] == 0 and len(parts[0].points) == 2
+    for k in range(1, len(parts)):  # each part starts where the controller got to: no gap, no skip
+        assert starts[k] <= starts[k - 1] + len(parts[k - 1].points)
+    assert starts[-1] + len(parts[-1].points) == len(positions)
+    assert node.plan_figures["stream_parts"] == len(parts)
+    assert node.plan_figures["realtime_factor"] > 0

@@ -68,3 +68,27 @@ def test_valid_request_plans_a_trajectory_and_reuses_the_twin(session):
     session.set_objects(moved, 0.0)
     assert _ask(session).planned
     assert session.twin_builds == builds
+
+
+def test_cheaper_twin_merges_other_objects_and_still_plans():
+    box = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
+    halves = [trimesh.creation.box(extents=(0.05, 0.05, 0.04)) for _ in range(2)]
+    for half, z in zip(halves, (0.02, -0.02), strict=True):
+        half.apply_translation((0.0, 0.0, z))
+    T = np.eye(4)
+    T[:3, 3] = (0.0, 0.0, 0.04)
+    beside = T.copy()
+    beside[1, 3] = 0.12
+    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
+    config.settle_s, config.merge_other_objects, config.rest_creeping_every_step = 0.0, True, True
+    s = ManipulationSession(config, 0.01)
+    s.set_objects([TwinObject(1, T, box, halves), TwinObject(2, beside, box, halves)], 0.0)
+    outcome = _ask(s, target=1)
+    assert outcome.planned, outcome.message
+    parts_per_object = [len(o.convex_parts) for o in s._twin_objects(1)]
+    assert parts_per_object == [2, 1]
+    full = ManipulationSession(PlannerConfig(), 0.01)
+    full.set_objects(s.objects, 0.0)
+    full._ensure_twin(1)
+    assert s.twin.model.ngeom == full.twin.model.ngeom - 1
+    s.close()
