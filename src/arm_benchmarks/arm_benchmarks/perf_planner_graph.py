@@ -164,6 +164,8 @@ def run_seed(seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClie
         client.meshes, client.planner_diag = None, {}
         if not client.spin_until(lambda: client.meshes is not None and client.meshes.objects, 400.0):
             return {"seed": seed, "error": "no /arm/meshes in time"}
+        # the first array may miss objects still being reconstructed: wait a while for (nearly) all
+        client.spin_until(lambda: len(client.meshes.objects) >= n_objects - 1, 90.0)
         client.client.wait_for_server(timeout_sec=60.0)
         if not client.spin_until(lambda: int(client.planner_diag.get("twin_objects", 0)) > 0, 120.0):
             return {"seed": seed, "error": "plan_node got no /arm/meshes in time"}
