@@ -51,7 +51,7 @@ def test_unknown_or_malformed_preset_is_refused(tmp_path):
 @pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.stem)
 def test_segmentation_node_starts_with_the_preset(path, tmp_path):
     if not node_built("segmentation"):
-        pytest.skip("segmentation_node is not installed (colcon build)")
+        pytest.fail("segmentation_node is not installed: run make setup (colcon build)")
     use_private_domain()
     with Graph(tmp_path) as graph:
         process = graph.start("segmentation", **node_options(load_preset(str(path)), "segmentation"))
