@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import time
 
@@ -189,12 +188,3 @@ def measure(n_objects: int = 10, seed: int = 0) -> dict:
     if os.environ.get("ARM_PERF_FIDELITY", "1") != "0":
         figures["twin_timestep_fidelity"] = timestep_fidelity(scene)
     return figures
-
-
-def main() -> int:
-    print(json.dumps(measure(), indent=2))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

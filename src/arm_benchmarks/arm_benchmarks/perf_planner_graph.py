@@ -226,12 +226,3 @@ def measure(seeds=(7, 3), n_objects: int = 10) -> dict:
         f"on), seeds {list(seeds)}, {os.cpu_count()} cores; first grasp with segmentation/reconstruction stopped"
     )
     return figures
-
-
-def main() -> int:
-    print(json.dumps(measure(), indent=2))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -30,13 +30,19 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return T
 
 
+def pixel_coordinates(points_camera: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Optical-frame points (..., 3), z > 0 -> pixel coordinates (u, v), each of shape (...)."""
+    x, y, z = points_camera[..., 0], points_camera[..., 1], points_camera[..., 2]
+    return x / z * K[0, 0] + K[0, 2], y / z * K[1, 1] + K[1, 2]
+
+
 def project_points(points_world: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray):
     """World points (N,3) -> pixel coordinates (N,2) and optical-frame depth (N,)."""
     T_camera_world = np.linalg.inv(T_world_camera)
     p = points_world @ T_camera_world[:3, :3].T + T_camera_world[:3, 3]
     z = p[:, 2]
-    uv = (p[:, :2] / np.maximum(z[:, None], 1e-9)) * np.diag(K)[:2] + K[:2, 2]
-    return uv, z
+    u, v = pixel_coordinates(np.column_stack([p[:, :2], np.maximum(z, 1e-9)]), K)
+    return np.stack([u, v], axis=1), z
 
 
 def fill_convex_hull(mask: np.ndarray, points_px: np.ndarray) -> None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from arm_core.camera import backproject_pixels
+from arm_core.camera import backproject_pixels, pixel_coordinates
 from arm_core.frames import FrameInputError, validate_frame
 
 CHANNELS = ("own", "others", "observed_empty", "unobserved")
@@ -238,9 +238,7 @@ class FrameObservation:
         )
         z = cam[..., 2]
         in_front = z > 1e-6
-        safe_z = np.where(in_front, z, 1.0)
-        u = np.floor(cam[..., 0] / safe_z * self.K[0, 0] + self.K[0, 2])
-        v = np.floor(cam[..., 1] / safe_z * self.K[1, 1] + self.K[1, 2])
+        u, v = (np.floor(c) for c in pixel_coordinates(np.where(in_front[..., None], cam, 1.0), self.K))
         in_image = in_front & (u >= 0) & (u < self.width) & (v >= 0) & (v < self.height)
         ui = np.where(in_image, u, 0).astype(np.int64)
         vi = np.where(in_image, v, 0).astype(np.int64)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_core.camera import backproject_image
+from arm_core.camera import backproject_image, pixel_coordinates
 
 
 class CameraPoseError(ValueError):
@@ -123,11 +123,6 @@ def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: f
     ranges = np.linalg.norm(points, axis=1)
     cos = np.abs(points @ plane[:3]) / np.maximum(ranges, 1e-9)
     return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.2)))
-
-
-def _pixels(points: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Image coordinates (u, v) of camera-frame points."""
-    return K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2], K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2]
 
 
 def _dense_share(u: np.ndarray, v: np.ndarray, inliers: np.ndarray, shape, params: CameraPoseParams) -> float:
@@ -235,7 +230,7 @@ def estimate_camera_pose(
         raise CameraPoseError(
             f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels"
         )
-    u, v = _pixels(points, K)
+    u, v = pixel_coordinates(points, K)
     problems = [plane_problem(plane, params) for plane, _ in planes]
     usable = [
         (plane, inliers)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from arm_core.camera import pixel_coordinates
 from arm_sim.robot import FLANGE_D_M, JOINT_NAMES, PANDA_DH, dh_link_transform
 
 # Covering capsules (start, end in the link frame, radius m) of the geoms arm_sim.robot.add_panda
@@ -86,10 +87,10 @@ def self_mask(
     ahead = z - radii > params.min_depth_m
     h, w = shape
     near = np.full((h, w), np.inf, dtype=np.float32)
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    for (x, y, zc), r in zip(c[ahead], radii[ahead], strict=True):  # one disc per sphere (about 100)
-        u, v = fx * x / zc + cx, fy * y / zc + cy
-        rad = max(fx, fy) * r / np.sqrt(max(zc * zc - r * r, 1e-9))
+    focal = max(K[0, 0], K[1, 1])
+    us, vs = pixel_coordinates(c[ahead], K)
+    for u, v, zc, r in zip(us, vs, z[ahead], radii[ahead], strict=True):  # one disc per sphere (about 100)
+        rad = focal * r / np.sqrt(max(zc * zc - r * r, 1e-9))
         x0, x1 = int(max(np.floor(u - rad), 0)), int(min(np.ceil(u + rad) + 1, w))
         y0, y1 = int(max(np.floor(v - rad), 0)), int(min(np.ceil(v + rad) + 1, h))
         if x0 >= x1 or y0 >= y1:
