@@ -64,8 +64,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--init-from",
         default="",
-        help="start from another run's state.pt (same input "
-        "channels: weights, optimiser, step and history) when --work-dir has no state yet",
+        help="when --work-dir has no state yet, start from another run's state.pt (weights, optimiser, "
+        "step and history) or from a checkpoint such as a shipped one (weights, step and history; a fresh "
+        "optimiser); the same input channels either way",
     )
     parser.add_argument("--save-float32", action="store_true", help="store float32 weights (default float16)")
     parser.add_argument(

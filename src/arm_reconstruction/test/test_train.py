@@ -97,3 +97,19 @@ def test_ablation_can_start_from_a_shared_trunk(box_data, tmp_path):
     assert result["steps"] == 3 and "connectivity" in history[-1] and "connectivity" not in history[0]
     with pytest.raises(SystemExit):
         train(_config(box_data, tmp_path / "base", variant="baseline", steps=3, init_from=str(trunk)), progress=False)
+
+
+def test_fine_tuning_starts_from_a_saved_checkpoint(box_data, tmp_path):
+    train(_config(box_data, tmp_path / "first", variant="arm", steps=2), progress=False)
+    shipped = tmp_path / "first" / "arm.pt"
+    weights = read_checkpoint(shipped)["state_dict"]
+    config = _config(box_data, tmp_path / "tuned", variant="arm", steps=4, init_from=str(shipped))
+    result = train(config, progress=False)
+    assert result["steps"] == 4
+    history = read_checkpoint(tmp_path / "tuned" / "arm.pt")["extra"]["loss_history"]
+    assert [h["step"] for h in history] == [1, 2, 3, 4]
+    model = load_checkpoint(tmp_path / "tuned" / "arm.pt")[0]
+    moved = [not torch.equal(weights[name].float(), value.half().float()) for name, value in model.state_dict().items()]
+    assert any(moved)
+    with pytest.raises(SystemExit):
+        train(_config(box_data, tmp_path / "base", variant="baseline", steps=3, init_from=str(shipped)), progress=False)

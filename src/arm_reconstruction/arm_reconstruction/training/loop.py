@@ -14,7 +14,7 @@ import torch
 from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
-from arm_reconstruction.checkpoint import save_checkpoint
+from arm_reconstruction.checkpoint import CHECKPOINT_FORMAT, read_checkpoint, save_checkpoint
 from arm_reconstruction.dataset import VoxelDataset, random_symmetry
 from arm_reconstruction.network import VARIANTS, build_model, select_input_channels
 from arm_reconstruction.training.config import TrainConfig, losses_for_batch
@@ -41,6 +41,23 @@ class _StopFlag:
         signal.signal(signal.SIGTERM, self._previous)
 
 
+def _is_shipped_checkpoint(path: pathlib.Path) -> bool:
+    payload = torch.load(path, map_location="cpu", weights_only=False)
+    return isinstance(payload, dict) and payload.get("format") == CHECKPOINT_FORMAT
+
+
+def _start_from_checkpoint(path: pathlib.Path, model: torch.nn.Module, variant: str) -> tuple:
+    """Fine-tuning from a saved checkpoint (for example a shipped one): its weights, step count,
+    thinned loss history and evaluations; a fresh optimiser. -> (step, history, evaluations, elapsed_s)."""
+    payload = read_checkpoint(path)
+    if VARIANTS[payload["config"]["variant"]] != VARIANTS[variant]:
+        raise SystemExit(f"--init-from {path}: variant {payload['config']['variant']} reads other input channels")
+    model.load_state_dict({key: value.float() for key, value in payload["state_dict"].items()})
+    extra = payload.get("extra", {})
+    history, evaluations = list(extra.get("loss_history", [])), list(extra.get("evaluations", []))
+    return int(extra.get("steps", 0)), history, evaluations, float(extra.get("train_wall_s", 0.0))
+
+
 def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict:
     """Run (or resume) a training; returns the final held-out metrics and timing."""
     rank, world, local_rank = torchrun_ranks()
@@ -65,7 +82,9 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
     augment_generator = torch.Generator().manual_seed(config.seed * 1000 + rank)
     step, history, evaluations, elapsed_s = 0, [], [], 0.0
     start_path = state_path if state_path.is_file() else pathlib.Path(config.init_from) if config.init_from else None
-    if start_path is not None:
+    if start_path is not None and start_path != state_path and _is_shipped_checkpoint(start_path):
+        step, history, evaluations, elapsed_s = _start_from_checkpoint(start_path, model, config.variant)
+    elif start_path is not None:
         state = torch.load(start_path, map_location=device, weights_only=False)
         state_variant = state["config"]["variant"]
         if start_path == state_path and state_variant != config.variant:
