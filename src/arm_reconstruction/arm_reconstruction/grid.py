@@ -14,6 +14,7 @@ Voxel (i, j, l) covers [origin + (i, j, l) * voxel_size_m, origin + (i + 1, j + 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
 from arm_core.camera import backproject_pixels, pixel_coordinates
@@ -27,6 +28,10 @@ MIN_DIAMETER_M = 0.01
 SUPPORT_BIN_M = 0.005
 SUPPORT_TOLERANCE_M = 0.01
 MAX_HULL_POINTS = 8192
+EDGE_INTERIOR_PX = 2
+EDGE_WINDOW_PX = 7
+EDGE_TOLERANCE_M = 0.01
+EDGE_TOLERANCE_PER_M = 0.02
 
 
 class GridInputError(FrameInputError):
@@ -143,6 +148,44 @@ def support_height(z_values: np.ndarray, max_height_m: float, min_points: int = 
     return float(np.median(z[near]))
 
 
+def consistent_object_pixels(depth_m: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """HxW bool: object pixels (label > 0, depth > 0) whose depth belongs to their object.
+
+    Along a mask's outline a real sensor returns mixed ("flying") depths between the object and what
+    is behind it, and depth registered a pixel off the colour image gives outline pixels the
+    background's depth: back-projected, they lie centimetres to metres behind the object, swell its
+    diameter (the grid's size) and add far-off observed voxels. A pixel further than EDGE_INTERIOR_PX
+    from its mask's border is kept; one nearer is kept when its depth lies within the range of the
+    object's interior depths in the EDGE_WINDOW_PX window around it (widened by EDGE_TOLERANCE_M +
+    EDGE_TOLERANCE_PER_M * depth) or, with no interior pixel in that window (a thin part), within the
+    object's interior depth range over the whole mask, equally widened; with no interior at all, kept."""
+    depth_m, labels = np.asarray(depth_m), np.asarray(labels)
+    valid = (labels > 0) & (depth_m > 0)
+    keep = valid.copy()
+    margin = EDGE_WINDOW_PX + EDGE_INTERIOR_PX
+    ids = np.unique(labels[valid])
+    dense = np.zeros(labels.shape, dtype=np.int32)
+    dense[valid] = np.searchsorted(ids, labels[valid]) + 1
+    for object_id, box in zip(ids, ndimage.find_objects(dense, len(ids)), strict=True):
+        if box is None:
+            continue
+        crop = tuple(slice(max(0, b.start - margin), b.stop + margin) for b in box)
+        mask = valid[crop] & (labels[crop] == object_id)
+        interior = ndimage.binary_erosion(mask, iterations=EDGE_INTERIOR_PX)
+        if not interior.any():
+            continue
+        depth = depth_m[crop]
+        tolerance = EDGE_TOLERANCE_M + EDGE_TOLERANCE_PER_M * depth
+        low = ndimage.minimum_filter(np.where(interior, depth, np.inf), EDGE_WINDOW_PX)
+        high = ndimage.maximum_filter(np.where(interior, depth, -np.inf), EDGE_WINDOW_PX)
+        no_interior_near = ~np.isfinite(low)
+        low = np.where(no_interior_near, depth[interior].min(), low)
+        high = np.where(no_interior_near, depth[interior].max(), high)
+        consistent = (depth >= low - tolerance) & (depth <= high + tolerance)
+        keep[crop] &= ~mask | interior | consistent
+    return keep
+
+
 class FrameObservation:
     """One RGB-D frame back-projected once and shared by the grids of all its objects."""
 
@@ -152,7 +195,7 @@ class FrameObservation:
         self.height, self.width = self.depth_m.shape
         self.T_camera_world = np.linalg.inv(self.T_world_camera)
         valid = self.depth_m > 0
-        v, u = np.nonzero(valid & (labels > 0))
+        v, u = np.nonzero(consistent_object_pixels(self.depth_m, labels))
         object_labels = labels[v, u].astype(np.int64)
         order = np.argsort(object_labels, kind="stable")
         v, u = v[order], u[order]

@@ -10,6 +10,7 @@ from arm_reconstruction.grid import (
     FrameObservation,
     GridFrame,
     GridInputError,
+    consistent_object_pixels,
     four_channel_grid,
     frame_grids,
     point_set_diameter,
@@ -261,3 +262,19 @@ def test_grid_is_fast_enough():
     per_object_ms = (time.process_time() - start) / 10 * 1000
     assert len(result.object_ids) == 10
     assert per_object_ms < 40, f"{per_object_ms:.1f} CPU-ms per object (target 20 ms; loose bound for a shared CPU)"
+
+
+def test_outline_pixels_with_the_backgrounds_depth_are_not_object_points():
+    depth = np.full((60, 80), 2.0)
+    labels = np.zeros((60, 80), np.int32)
+    labels[20:40, 20:40] = 4  # a box face 1 m away
+    depth[20:40, 20:40] = 1.0 + 0.001 * np.arange(20)[None, :]
+    labels[30:40, 45:56], labels[5:30, 50] = 6, 6  # another object: a block and a one-pixel-wide stem
+    depth[30:40, 45:56], depth[5:30, 50] = 1.2, 1.2
+    depth[20:40, 39] = 2.0  # misregistered outline: the background's depth
+    depth[20, 25:30] = 1.5  # flying pixels, halfway to the background
+    depth[5, 50] = 2.0
+    keep = consistent_object_pixels(depth, labels)
+    assert not keep[20:40, 39].any() and not keep[20, 25:30].any()
+    assert keep[21:39, 20:39].all() and keep[6:40, 50].all() and not keep[5, 50]
+    assert not keep[labels == 0].any()
