@@ -162,7 +162,9 @@ def measure(
                 np.float32
             )
         oracle_s = time.perf_counter()
-        objects = reconstructor.build_objects(grids, probabilities, data.labels, data.K, data.T_world_camera)
+        objects = reconstructor.build_objects(
+            grids, probabilities, data.depth_m, data.labels, data.K, data.T_world_camera
+        )
         built = time.perf_counter()
         objects_to_msg(objects, message.header, main_table_height(objects))
         markers_msg(objects, message.header)

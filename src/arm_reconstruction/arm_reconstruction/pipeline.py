@@ -32,8 +32,9 @@ from .meshing import (
     remove_intersections,
 )
 from .network import METHODS, canonical_method, predict_occupancy, prepare_for_inference, resolve_device
+from .surface_snapping import SnapSettings, smoothed_object_depth, snap_to_observed_depth
 
-STAGES = ("grid", "network", "postprocess", "meshing", "intersections", "decomposition", "visibility")
+STAGES = ("grid", "network", "postprocess", "meshing", "snapping", "intersections", "decomposition", "visibility")
 
 
 class StageTimer:
@@ -89,7 +90,8 @@ class ReconstructionSettings:
     """method: one of network.METHODS; checkpoint_path '' = the shipped checkpoint of the method's
     network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
     over object diameter; threshold: occupancy probability of a solid voxel; table_height_m None =
-    estimated per object."""
+    estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
+    (surface_snapping), with snap settings `snap`."""
 
     method: str = "arm"
     checkpoint_path: str = ""
@@ -99,6 +101,8 @@ class ReconstructionSettings:
     threshold: float = DEFAULT_THRESHOLD
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
+    snap_to_depth: bool = True
+    snap: SnapSettings = field(default_factory=SnapSettings)
     remove_intersections: bool = True
     decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
     estimate_visibility: bool = True
@@ -205,7 +209,7 @@ class Reconstructor:
         self.timer.reset()
         grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
         probabilities = self.predict(grids)
-        return self.build_objects(grids, probabilities, labels, K, T_world_camera)
+        return self.build_objects(grids, probabilities, depth_m, labels, K, T_world_camera)
 
     def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
         s = self.settings
@@ -225,7 +229,7 @@ class Reconstructor:
         return probabilities
 
     def build_objects(
-        self, grids: FrameGrids, probabilities: np.ndarray, labels, K, T_world_camera
+        self, grids: FrameGrids, probabilities: np.ndarray, depth_m, labels, K, T_world_camera
     ) -> list[ReconstructedObject]:
         """Meshes, intersection removal, convex parts and visibility for per-object occupancy
         probabilities [N, d, d, d] laid out in grids.frames (the stages after the network)."""
@@ -250,13 +254,16 @@ class Reconstructor:
                 )
                 for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
             ]
+        K = np.asarray(K, dtype=np.float64)
+        T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
+        if s.snap_to_depth and meshes:
+            with self.timer("snapping"):
+                meshes = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
                 meshes, _ = remove_intersections(meshes)
 
         objects = {i: _empty_object(i, s.method, reason) for i, reason in grids.errors.items()}
-        K = np.asarray(K, dtype=np.float64)
-        T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
         for n, (object_id, frame, mesh) in enumerate(zip(grids.object_ids, grids.frames, meshes, strict=True)):
             if len(mesh.faces) == 0:
                 reason = f"no voxel above threshold {s.threshold} for object {object_id}"
@@ -276,6 +283,27 @@ class Reconstructor:
                 object_id, T_world_object, local, parts, visible, frame, s.method, "", kept, from_observed[n]
             )
         return [objects[i] for i in sorted(objects)]
+
+
+    def snap_meshes(self, meshes, grids: FrameGrids, depth_m, labels, K, T_world_camera) -> list[trimesh.Trimesh]:
+        """Each mesh's seen vertices moved onto the object's observed depth (surface_snapping), by at
+        most snap.max_shift_voxels of its grid's voxels."""
+        snap = self.settings.snap
+        object_depth = smoothed_object_depth(depth_m, labels, grids.object_ids, snap)
+        return [
+            snap_to_observed_depth(
+                mesh,
+                object_depth,
+                labels,
+                object_id,
+                K,
+                T_world_camera,
+                snap.max_shift_voxels * frame.voxel_size_m,
+                frame.table_height_m,
+                snap,
+            )[0]
+            for mesh, object_id, frame in zip(meshes, grids.object_ids, grids.frames, strict=True)
+        ]
 
 
 _RECONSTRUCTORS: dict[ReconstructionSettings, Reconstructor] = {}

@@ -67,7 +67,7 @@ def test_objects_from_ground_truth_occupancy_are_simulation_ready(sim, checkpoin
     grids = reconstructor.grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
     pairs = zip(grids.object_ids, grids.frames, strict=True)
     truth = np.stack([voxelize_mesh(scene.objects[i - 1].world_mesh(), f) for i, f in pairs]).astype(np.float32)
-    objects = reconstructor.build_objects(grids, truth, frame.labels, frame.K, frame.T_world_camera)
+    objects = reconstructor.build_objects(grids, truth, frame.depth_m, frame.labels, frame.K, frame.T_world_camera)
     assert all(o.ok for o in objects)
     solids, fidelity = [], []
     for obj in objects:

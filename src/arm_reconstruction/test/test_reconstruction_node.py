@@ -70,7 +70,7 @@ def test_messages_round_trip(sim, checkpoint):
     grids = reconstructor.grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
     pairs = zip(grids.object_ids, grids.frames, strict=True)
     truth = np.stack([voxelize_mesh(scene.objects[i - 1].world_mesh(), f) for i, f in pairs]).astype(np.float32)
-    objects = reconstructor.build_objects(grids, truth, frame.labels, frame.K, frame.T_world_camera)
+    objects = reconstructor.build_objects(grids, truth, frame.depth_m, frame.labels, frame.K, frame.T_world_camera)
     ok = [o for o in objects if o.ok]
     assert ok
     back = object_from_msg(object_to_msg(ok[0]))

@@ -49,6 +49,7 @@ class BenchConfig:
     depth_noise: bool = True
     domain: str = DEFAULT_DOMAIN
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
+    snap_to_depth: bool = True
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4

@@ -54,14 +54,18 @@ def file_digest(path) -> str:
     return hashlib.sha256(pathlib.Path(path).read_bytes()).hexdigest()
 
 
-def load_reconstructors(methods, checkpoint_dir: str = "", smoothing_iterations: int = 0) -> tuple[dict, dict, dict]:
+def load_reconstructors(
+    methods, checkpoint_dir: str = "", smoothing_iterations: int = 0, snap_to_depth: bool = True
+) -> tuple[dict, dict, dict]:
     """-> (name -> Reconstructor, name -> reason skipped, name -> checkpoint path and sha256). Methods
     sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods."""
     reconstructors, skipped, checkpoints, by_variant = {}, {}, {}, {}
     for name in methods:
         if name not in METHODS:
             continue
-        settings = ReconstructionSettings(method=name, smoothing_iterations=smoothing_iterations)
+        settings = ReconstructionSettings(
+            method=name, smoothing_iterations=smoothing_iterations, snap_to_depth=snap_to_depth
+        )
         if checkpoint_dir:
             path = pathlib.Path(checkpoint_dir) / f"{settings.variant}.pt"
             settings = dataclasses.replace(settings, checkpoint_path=str(path))
@@ -82,7 +86,10 @@ def load_reconstructors(methods, checkpoint_dir: str = "", smoothing_iterations:
     if VISIBLE_ONLY in methods:
         resolutions = [r.resolution for r in reconstructors.values()]
         resolution = reconstructors["arm"].resolution if "arm" in reconstructors else max(resolutions, default=0)
-        only = VisibleOnly(ReconstructionSettings(method="baseline", resolution=resolution or DEFAULT_RESOLUTION))
+        only_settings = ReconstructionSettings(
+            method="baseline", resolution=resolution or DEFAULT_RESOLUTION, snap_to_depth=snap_to_depth
+        )
+        only = VisibleOnly(only_settings)
         reconstructors = {VISIBLE_ONLY: only, **reconstructors}
     return reconstructors, skipped, checkpoints
 
@@ -116,7 +123,8 @@ def _qualitative_payload(scene, frame, object_id: int, meshes: dict) -> dict:
 
 def _score_method(reconstructor, grids, labels, frame, truths: dict, match: dict, table, config) -> tuple:
     """One method on one view -> ({truth id: metrics}, {truth id: reconstructed world mesh})."""
-    objects = reconstructor.build_objects(grids, reconstructor.predict(grids), labels, frame.K, frame.T_world_camera)
+    probabilities = reconstructor.predict(grids)
+    objects = reconstructor.build_objects(grids, probabilities, frame.depth_m, labels, frame.K, frame.T_world_camera)
     built = {o.id: o for o in objects if o.ok}
     twins = [twin_object(o.id, o.T_world_object, o.mesh, o.convex_parts) for o in built.values()]
     moved = scene_stability(twins, *table, config.settle_s, config.physics_timestep_s)
