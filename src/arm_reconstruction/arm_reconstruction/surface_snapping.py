@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 import trimesh
-from scipy import ndimage
 
 from arm_core.camera import pixel_coordinates, transform_points
+
+from .object_depth import object_depth_average
 
 
 @dataclass(frozen=True)
@@ -36,34 +37,8 @@ class SnapSettings:
 
 def smoothed_object_depth(depth_m: np.ndarray, labels: np.ndarray, object_ids, settings: SnapSettings) -> np.ndarray:
     """Each object's depth (metres) averaged over a smoothing_px box within its own eroded mask, all
-    in one image (the masks are disjoint); 0 where no object's eroded mask is or the box holds no return."""
-    depth_m, labels = np.asarray(depth_m, dtype=np.float32), np.asarray(labels)
-    out = np.zeros_like(depth_m)
-    margin = settings.smoothing_px + settings.mask_erosion_px + 1
-    for object_id, box in zip(
-        object_ids, ndimage.find_objects(_dense_labels(labels, object_ids), len(object_ids)), strict=True
-    ):
-        if box is None:
-            continue
-        crop = tuple(slice(max(0, s.start - margin), s.stop + margin) for s in box)
-        mask = labels[crop] == object_id
-        if settings.mask_erosion_px > 0:
-            mask = ndimage.binary_erosion(mask, iterations=settings.mask_erosion_px)
-        valid = mask & (depth_m[crop] > 0)
-        if not valid.any():
-            continue
-        total = ndimage.uniform_filter(np.where(valid, depth_m[crop], 0.0), settings.smoothing_px, mode="constant")
-        count = ndimage.uniform_filter(valid.astype(np.float32), settings.smoothing_px, mode="constant")
-        out[crop] = np.where(valid, total / np.maximum(count, 1e-9), out[crop])
-    return out
-
-
-def _dense_labels(labels: np.ndarray, object_ids) -> np.ndarray:
-    """labels renumbered 1..len(object_ids) in object_ids' order (0 elsewhere), for find_objects."""
-    dense = np.zeros(labels.shape, dtype=np.int32)
-    for n, object_id in enumerate(object_ids, start=1):
-        dense[labels == object_id] = n
-    return dense
+    in one image; 0 where no object's eroded mask is or the pixel has no return."""
+    return object_depth_average(depth_m, labels, object_ids, settings.smoothing_px, settings.mask_erosion_px)
 
 
 def vertex_adjacency(mesh: trimesh.Trimesh) -> scipy.sparse.csr_matrix:
