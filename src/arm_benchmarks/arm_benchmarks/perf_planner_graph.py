@@ -41,6 +41,8 @@ DIAG_KEYS = (
     "mppi_step_ms_median",
     "mppi_step_ms_p90",
     "mppi_step_cpu_ms_median",
+    "mppi_paths_median",
+    "mppi_paths_min",
     "stream_parts",
     "stream_stall_s",
 )

@@ -73,6 +73,37 @@ def set_sleep(model: mujoco.MjModel, trees: np.ndarray, start_asleep: bool) -> N
     model.tree_sleep_policy[np.asarray(trees, dtype=int)] = int(policy)
 
 
+class PathBudget:
+    """Paths per MPPI step that keep planning within `realtime_factor` of the motion it plans (MJPC
+    style: under CPU load a plan gets fewer rollouts, not more time). After each step the cost of a
+    path is estimated from the step's wall time (exponential average); the next step gets as many
+    paths as fit realtime_factor * control_dt_s, within [min_paths, max_paths]."""
+
+    def __init__(
+        self, max_paths: int, min_paths: int, realtime_factor: float, control_dt_s: float, smoothing: float = 0.3
+    ):
+        if not 1 <= min_paths <= max_paths or realtime_factor <= 0 or control_dt_s <= 0 or not 0 < smoothing <= 1:
+            raise ValueError(
+                f"need 1 <= min_paths {min_paths} <= max_paths {max_paths}, realtime_factor {realtime_factor} > 0, "
+                f"control_dt_s {control_dt_s} > 0 and smoothing {smoothing} in (0, 1]"
+            )
+        self.max_paths, self.min_paths = int(max_paths), int(min_paths)
+        self.step_budget_s = float(realtime_factor) * float(control_dt_s)
+        self.smoothing = float(smoothing)
+        self.path_cost_s: float | None = None
+        self.paths = self.max_paths
+
+    def update(self, paths_used: int, step_wall_s: float) -> int:
+        """Record a step's wall time with paths_used paths -> paths for the next step."""
+        cost = max(float(step_wall_s), 0.0) / max(int(paths_used), 1)
+        self.path_cost_s = (
+            cost if self.path_cost_s is None else (1 - self.smoothing) * self.path_cost_s + self.smoothing * cost
+        )
+        fit = int(self.step_budget_s / max(self.path_cost_s, 1e-9))
+        self.paths = int(np.clip(fit, self.min_paths, self.max_paths))
+        return self.paths
+
+
 class BatchedRollout:
     """Rolls out [N, H] control-step sequences; returns the state at the end of each control step.
 
@@ -236,11 +267,12 @@ class Mppi:
         """Nominal sequence = hold still."""
         self.nominal = np.zeros((self.config.horizon, self.model.nu))
 
-    def sample_noise(self, noise_basis: np.ndarray) -> np.ndarray:
-        """Smoothed noise [N, H, nu] = AR(1) white noise [N, H, k] through basis [k, nu]; path 0 is zero."""
+    def sample_noise(self, noise_basis: np.ndarray, num_paths: int | None = None) -> np.ndarray:
+        """Smoothed noise [N, H, nu] = AR(1) white noise [N, H, k] through basis [k, nu]; path 0 is zero.
+        N = num_paths (default config.num_paths)."""
         cfg = self.config
         k = noise_basis.shape[0]
-        white = self.rng.standard_normal((cfg.num_paths, cfg.horizon, k))
+        white = self.rng.standard_normal((int(num_paths or cfg.num_paths), cfg.horizon, k))
         beta = cfg.noise_smoothing
         smooth = np.empty_like(white)
         smooth[:, 0] = white[:, 0]
@@ -257,15 +289,17 @@ class Mppi:
         reward_fn: RewardFn,
         noise_basis: np.ndarray,
         fixed_controls: dict[int, float] | None = None,
+        num_paths: int | None = None,
     ) -> StepResult:
         """One MPPI iteration from `state`; returns the next control (targets) to execute.
 
         `noise_basis` [k, nu]: rows are rate directions (with scale, ctrl units / s) noise is drawn along.
         `fixed_controls`: actuator index -> target forced over the whole horizon (e.g. the gripper).
+        `num_paths`: paths sampled this step (default config.num_paths).
         """
         cfg = self.config
         rates = np.clip(
-            self.nominal[None] + self.sample_noise(noise_basis), -self.limits.max_rate, self.limits.max_rate
+            self.nominal[None] + self.sample_noise(noise_basis, num_paths), -self.limits.max_rate, self.limits.max_rate
         )
         previous = np.asarray(previous_control, dtype=np.float64)
         fixed = fixed_controls or {}

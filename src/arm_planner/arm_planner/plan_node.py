@@ -60,6 +60,15 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.merge_other_objects = declare(
         node, "merge_other_objects", True, "Cheaper twin: every object but the target as one convex hull"
     )
+    config.realtime_factor = declare(
+        node,
+        "realtime_factor",
+        0.9,
+        "Planning wall time per planned motion time the path count adapts to (0: always num_paths)",
+        0.0,
+        100.0,
+    )
+    config.min_paths = declare(node, "min_paths", 8, "Fewest paths per step when planning in real time", 2, 1000)
     task_steps = {
         task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
         for task, steps in DEFAULT_TASK_STEPS.items()
@@ -234,6 +243,8 @@ class PlanNode(Node):
                 "mppi_step_ms_median": float(np.median(result.step_ms)),
                 "mppi_step_ms_p90": float(np.percentile(result.step_ms, 90)),
                 "mppi_step_cpu_ms_median": float(np.median(result.step_cpu_ms)),
+                "mppi_paths_median": float(np.median(result.step_paths)),
+                "mppi_paths_min": float(np.min(result.step_paths)),
                 "stream_parts": stream.parts if stream is not None else 0,
                 "stream_stall_s": stream.stall_s if stream is not None else 0.0,
             }

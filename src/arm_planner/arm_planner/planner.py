@@ -20,6 +20,7 @@ from arm_planner.mppi import (
     ControlLimits,
     Mppi,
     MppiConfig,
+    PathBudget,
     free_body_trees,
     get_state,
     set_sleep,
@@ -88,6 +89,11 @@ class PlannerConfig:
     # Cheaper twin: every object but the target is one convex hull (its parts merged); their part-part
     # contacts in a pile of reconstructed objects otherwise cost most of every rollout.
     merge_other_objects: bool = False
+    # Real-time planning (0: off, every step samples mppi.num_paths): paths per step adapt so that a
+    # step's wall time stays within this factor of control_dt_s (mppi.PathBudget), never below
+    # min_paths. Outcomes then depend on the machine's load, so benchmarks leave it off.
+    realtime_factor: float = 0.0
+    min_paths: int = 8
     # Physics time the twin is settled for (robot holding still) before planning.
     settle_s: float = 0.3
     # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
@@ -110,6 +116,8 @@ class PlanResult:
     step_ms: np.ndarray
     # CPU time per step summed over all threads of the process (rollout workers included), ms.
     step_cpu_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # Paths sampled per step.
+    step_paths: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     # Planning stopped early: the task was met and held for done_hold_steps in the twin.
     held: bool = False
 
@@ -286,7 +294,15 @@ class Planner:
             set_sleep(model, self._object_trees, start_asleep=True)
         self._rest_objects_here(data)
         self.mppi.reset()
-        controls, states, step_ms, step_cpu_ms = [], [], [], []
+        controls, states, step_ms, step_cpu_ms, step_paths = [], [], [], [], []
+        paths, iteration_start = cfg.mppi.num_paths, 0.0
+        path_budget = (
+            PathBudget(
+                cfg.mppi.num_paths, min(cfg.min_paths, cfg.mppi.num_paths), cfg.realtime_factor, cfg.mppi.control_dt_s
+            )
+            if cfg.realtime_factor > 0
+            else None
+        )
         met_streak, met, error, held = 0, False, float("inf"), False
         message = "step budget used"
         budget = int(cfg.task_steps.get(request.task) or cfg.mppi.steps)
@@ -295,11 +311,16 @@ class Planner:
                 message = "stopped"
                 break
             t0, c0 = time.perf_counter(), time.process_time()
+            if path_budget is not None and step > 0:  # the whole previous iteration, not just its MPPI step
+                paths = path_budget.update(paths, t0 - iteration_start)
+            iteration_start = t0
             state = get_state(model, data)
             gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
-            result = self.mppi.step(state, ctrl, reward, self.noise_basis(data), {int(robot.gripper_actuator): gripper})
+            fixed = {int(robot.gripper_actuator): gripper}
+            result = self.mppi.step(state, ctrl, reward, self.noise_basis(data), fixed, num_paths=paths)
             step_ms.append(1e3 * (time.perf_counter() - t0))
             step_cpu_ms.append(1e3 * (time.process_time() - c0))
+            step_paths.append(paths)
             self._last_ret, self._last_w = result.returns, result.weights
             for target in self.mppi.rollout.substep_controls(ctrl, result.control[None, None])[0]:
                 data.ctrl[:] = target
@@ -344,5 +365,6 @@ class Planner:
             states=states,
             step_ms=np.array(step_ms),
             step_cpu_ms=np.array(step_cpu_ms),
+            step_paths=np.array(step_paths, dtype=int),
             held=held,
         )

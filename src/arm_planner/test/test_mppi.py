@@ -1,5 +1,6 @@
 import mujoco
 import numpy as np
+import pytest
 from gantry import gantry_model
 
 from arm_planner.mppi import (
@@ -7,6 +8,7 @@ from arm_planner.mppi import (
     ControlLimits,
     Mppi,
     MppiConfig,
+    PathBudget,
     free_body_trees,
     get_state,
     set_sleep,
@@ -150,3 +152,17 @@ def test_with_sleep_each_path_is_independent_of_the_paths_before_it():
         alone = rollout(state, controls[1:], data.ctrl.copy())
         np.testing.assert_array_equal(batch[1], alone[0])
         rollout.close()
+
+
+def test_path_budget_fits_the_paths_into_the_step_time():
+    budget = PathBudget(max_paths=25, min_paths=8, realtime_factor=1.0, control_dt_s=0.02, smoothing=1.0)
+    assert budget.paths == 25
+    assert budget.update(25, 0.040) == 12  # 1.6 ms a path: 12 fit into 20 ms
+    assert budget.update(12, 0.012) == 20  # 1 ms a path
+    assert budget.update(20, 0.200) == 8  # never below min_paths
+    assert budget.update(8, 0.001) == 25  # never above max_paths
+    averaged = PathBudget(25, 2, 1.0, 0.02, smoothing=0.5)
+    averaged.update(10, 0.010)
+    assert averaged.update(10, 0.030) == 10  # mean of 1 and 3 ms a path: 2 ms
+    with pytest.raises(ValueError):
+        PathBudget(25, 30, 1.0, 0.02)

@@ -62,3 +62,17 @@ def test_unknown_target_body_is_refused():
     with pytest.raises(ValueError, match="unknown task"):
         planner.plan(state, PlanRequest("juggle", "object_0"), geometry)
     planner.close()
+
+
+def test_realtime_planning_samples_fewer_paths_when_steps_are_slow():
+    planner, state, geometry = _setup(steps=30)
+    planner.config.realtime_factor = 1e-3  # a budget no step can meet: the fewest paths from the second step
+    planner.config.min_paths = 5
+    result = planner.plan(state, PlanRequest("push", "object_0", np.array([0.05, -0.2, 0.0])), geometry)
+    assert result.step_paths[0] == planner.config.mppi.num_paths
+    assert np.all(result.step_paths[1:] == 5) and len(result.step_paths) == len(result.times_s)
+    planner.close()
+    fixed, state, geometry = _setup(steps=5)
+    result = fixed.plan(state, PlanRequest("push", "object_0", np.array([0.05, -0.2, 0.0])), geometry)
+    assert np.all(result.step_paths == fixed.config.mppi.num_paths)
+    fixed.close()
