@@ -17,8 +17,10 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
-from arm_core.camera import backproject_pixels, pixel_coordinates
+from arm_core.camera import backproject_image, backproject_pixels, organized_normals, pixel_coordinates
 from arm_core.frames import FrameInputError, validate_frame
+
+from .object_depth import object_depth_average
 
 CHANNELS = ("own", "others", "observed_empty", "unobserved")
 DEFAULT_RESOLUTION = 32
@@ -32,6 +34,7 @@ EDGE_INTERIOR_PX = 2
 EDGE_WINDOW_PX = 7
 EDGE_TOLERANCE_M = 0.01
 EDGE_TOLERANCE_PER_M = 0.02
+NORMAL_WINDOW_PX = 5
 
 
 class GridInputError(FrameInputError):
@@ -97,12 +100,14 @@ class GridFrame:
 @dataclass
 class FrameGrids:
     """Grids of the objects of one frame: grids[n] belongs to object_ids[n]; objects that could not
-    be gridded are in errors (id -> reason) and have no grid."""
+    be gridded are in errors (id -> reason) and have no grid. observation: the back-projected frame
+    they were built from (object points and normals)."""
 
     grids: np.ndarray
     frames: list[GridFrame]
     object_ids: list[int]
     errors: dict[int, str]
+    observation: "FrameObservation | None" = None
 
 
 def point_set_diameter(points: np.ndarray) -> float:
@@ -199,6 +204,9 @@ class FrameObservation:
         object_labels = labels[v, u].astype(np.int64)
         order = np.argsort(object_labels, kind="stable")
         v, u = v[order], u[order]
+        self._object_pixels = (v, u)
+        self._object_normals = None
+        self._labels = labels
         self.object_points = self._backproject(v, u)
         self.object_point_labels = object_labels[order]
         s = int(background_stride)
@@ -217,6 +225,20 @@ class FrameObservation:
     def points_of(self, object_id: int) -> np.ndarray:
         sl = self._slices.get(int(object_id))
         return self.object_points[sl] if sl is not None else np.zeros((0, 3))
+
+    def normals_of(self, object_id: int) -> np.ndarray:
+        """(N, 3) world-frame unit surface normals (towards the camera) at points_of(object_id), from
+        the organized depth image with each object's holes filled from its own pixels
+        (NORMAL_WINDOW_PX box); zero where that leaves a neighbour without depth."""
+        if self._object_normals is None:
+            filled = object_depth_average(
+                self.depth_m, self._labels, self.object_ids, NORMAL_WINDOW_PX, fill_holes=True
+            )
+            normals_camera = organized_normals(backproject_image(filled, self.K))
+            v, u = self._object_pixels
+            self._object_normals = normals_camera[v, u].astype(np.float64) @ self.T_world_camera[:3, :3].T
+        sl = self._slices.get(int(object_id))
+        return self._object_normals[sl] if sl is not None else np.zeros((0, 3))
 
     def frame_table_height(self, max_height_m: float) -> float | None:
         return support_height(self.background_z, max_height_m, min_points=50)
@@ -340,7 +362,7 @@ def frame_grids(
         ok_ids.append(object_id)
     d = int(resolution)
     stacked = np.stack(grids) if grids else np.zeros((0, 4, d, d, d), dtype=np.float32)
-    return FrameGrids(stacked, frames, ok_ids, errors)
+    return FrameGrids(stacked, frames, ok_ids, errors, observation)
 
 
 def _check_settings(resolution, k):

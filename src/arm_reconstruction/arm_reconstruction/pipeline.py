@@ -32,9 +32,20 @@ from .meshing import (
     remove_intersections,
 )
 from .network import METHODS, canonical_method, predict_occupancy, prepare_for_inference, resolve_device
+from .revolution import RevolutionSettings, revolution_completion
 from .surface_snapping import SnapSettings, smoothed_object_depth, snap_to_observed_depth
 
-STAGES = ("grid", "network", "postprocess", "meshing", "snapping", "intersections", "decomposition", "visibility")
+STAGES = (
+    "grid",
+    "network",
+    "postprocess",
+    "meshing",
+    "revolutions",
+    "snapping",
+    "intersections",
+    "decomposition",
+    "visibility",
+)
 
 
 class StageTimer:
@@ -91,7 +102,8 @@ class ReconstructionSettings:
     network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
     over object diameter; threshold: occupancy probability of a solid voxel; table_height_m None =
     estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
-    (surface_snapping), with snap settings `snap`."""
+    (surface_snapping), with snap settings `snap`; complete_revolutions: an object whose seen points
+    lie on an upright solid of revolution that agrees with the view becomes that solid (revolution)."""
 
     method: str = "arm"
     checkpoint_path: str = ""
@@ -103,6 +115,8 @@ class ReconstructionSettings:
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     snap_to_depth: bool = True
     snap: SnapSettings = field(default_factory=SnapSettings)
+    complete_revolutions: bool = True
+    revolution: RevolutionSettings = field(default_factory=RevolutionSettings)
     remove_intersections: bool = True
     decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
     estimate_visibility: bool = True
@@ -256,9 +270,14 @@ class Reconstructor:
             ]
         K = np.asarray(K, dtype=np.float64)
         T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
+        revolved = [False] * len(meshes)
+        if s.complete_revolutions and grids.observation is not None:
+            with self.timer("revolutions"):
+                meshes, revolved = self.complete_revolutions(meshes, grids)
         if s.snap_to_depth and meshes:
             with self.timer("snapping"):
-                meshes = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
+                snapped = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
+                meshes = [m if done else n for m, n, done in zip(meshes, snapped, revolved, strict=True)]
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
                 meshes, _ = remove_intersections(meshes)
@@ -284,6 +303,19 @@ class Reconstructor:
             )
         return [objects[i] for i in sorted(objects)]
 
+    def complete_revolutions(self, meshes, grids: FrameGrids) -> tuple[list[trimesh.Trimesh], list[bool]]:
+        """Each non-empty mesh replaced by its object's solid of revolution where one fits the view
+        (revolution_completion) -> (meshes, replaced per mesh)."""
+        out, replaced = [], []
+        for mesh, object_id, frame, grid in zip(meshes, grids.object_ids, grids.frames, grids.grids, strict=True):
+            solid = None
+            if len(mesh.faces):
+                observation = grids.observation
+                points, normals = observation.points_of(object_id), observation.normals_of(object_id)
+                solid = revolution_completion(points, normals, frame, grid, self.settings.revolution)
+            out.append(solid if solid is not None else mesh)
+            replaced.append(solid is not None)
+        return out, replaced
 
     def snap_meshes(self, meshes, grids: FrameGrids, depth_m, labels, K, T_world_camera) -> list[trimesh.Trimesh]:
         """Each mesh's seen vertices moved onto the object's observed depth (surface_snapping), by at

@@ -1,4 +1,4 @@
-"""Organized depth images: hole filling, smoothing and surface normals (all vectorized)."""
+"""Organized depth images: hole filling and edge-preserving smoothing (vectorized)."""
 
 import cv2
 import numpy as np
@@ -27,29 +27,3 @@ def preprocess_depth(depth_m: np.ndarray, fill_radius_px: int = 1, smooth_sigma_
     smoothed = cv2.bilateralFilter(filled, 5, smooth_sigma_m, 2.0)
     smoothed[filled <= 0] = 0.0
     return smoothed
-
-
-def organized_normals(points: np.ndarray, step_px: int = 2) -> np.ndarray:
-    """Unit normals (HxWx3, camera frame, pointing towards the camera) from central differences.
-
-    Differences are taken `step_px` pixels apart; pixels whose neighbours are missing get a zero normal.
-    """
-    s = step_px
-    h, w, _ = points.shape
-    dx = np.zeros_like(points)
-    dy = np.zeros_like(points)
-    dx[:, s:-s] = points[:, 2 * s :] - points[:, : -2 * s]
-    dy[s:-s, :] = points[2 * s :, :] - points[: -2 * s, :]
-    nx = dx[..., 1] * dy[..., 2] - dx[..., 2] * dy[..., 1]
-    ny = dx[..., 2] * dy[..., 0] - dx[..., 0] * dy[..., 2]
-    nz = dx[..., 0] * dy[..., 1] - dx[..., 1] * dy[..., 0]
-    z = points[..., 2]
-    ok = z > 0
-    ok[:, s:-s] &= (z[:, 2 * s :] > 0) & (z[:, : -2 * s] > 0)
-    ok[s:-s, :] &= (z[2 * s :, :] > 0) & (z[: -2 * s, :] > 0)
-    ok[:, :s] = ok[:, -s:] = ok[:s, :] = ok[-s:, :] = False
-    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-    ok &= norm > 1e-12
-    towards_camera = nx * points[..., 0] + ny * points[..., 1] + nz * z <= 0
-    scale = np.where(ok, np.where(towards_camera, 1.0, -1.0) / np.where(ok, norm, 1.0), 0.0).astype(np.float32)
-    return np.stack([nx * scale, ny * scale, nz * scale], axis=-1)

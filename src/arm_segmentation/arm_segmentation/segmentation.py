@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from arm_core.camera import backproject_image, transform_points
+from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
-from arm_segmentation.geometry import organized_normals, preprocess_depth
+from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
 from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample
 from arm_segmentation.table_plane import (
