@@ -235,6 +235,12 @@ def main(argv=None) -> int:
         help="closed loop: the twin observes the world's state every this many seconds (0: open loop, the paper's)",
     )
     parser.add_argument("--nthread", type=int, default=2)
+    parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
+    parser.add_argument(
+        "--node-twin",
+        action="store_true",
+        help="plan_node's cheaper twin: other objects one convex hull each, creeping untouched objects put to rest",
+    )
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
@@ -242,6 +248,8 @@ def main(argv=None) -> int:
         args.methods = [benchmark_method(m) for m in args.methods]
     except ValueError as error:
         parser.error(f"{error}, or {GROUND_TRUTH}")
+    if args.num_paths < 2:
+        parser.error("--num-paths must be >= 2")
 
     torch.set_num_threads(2)
     out = pathlib.Path(args.out)
@@ -259,6 +267,8 @@ def main(argv=None) -> int:
     config = PlannerConfig()
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
+    config.mppi.num_paths = args.num_paths
+    config.merge_other_objects = config.rest_creeping_every_step = args.node_twin
     config.close_steps = args.close_steps
     budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
@@ -279,6 +289,8 @@ def main(argv=None) -> int:
         "nthread": args.nthread,
         "domain": args.domain,
     }
+    if args.num_paths != 25 or args.node_twin:  # keys of earlier runs stay valid
+        settings |= {"num_paths": args.num_paths, "node_twin": args.node_twin}
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(
