@@ -105,25 +105,21 @@ def fit_revolution(
     heights = points[:, 2] - support_height_m
     slice_index = np.floor(np.maximum(heights, 0.0) / settings.slice_m).astype(np.int64)
     keep = np.ones(len(points), bool)
-    for _ in range(3):
+    for outlier_round in range(4):  # three rounds of outlier removal, then the final fit
         counts = np.bincount(slice_index[keep], minlength=slice_index.max() + 1)
         keep &= counts[slice_index] >= settings.min_slice_points
         if keep.sum() < settings.min_points:
             return None
         used, dense = np.unique(slice_index[keep], return_inverse=True)
         centre, radii = _solve(points[keep], dense, len(used))
+        if outlier_round == 3:
+            break
         radius_of_point = np.zeros(slice_index.max() + 1)
         radius_of_point[used] = radii
         offsets = points[:, :2] - centre
         residual = np.linalg.norm(offsets, axis=1) - radius_of_point[slice_index]
         spread = 1.4826 * np.median(np.abs(residual[keep])) + 1e-4
         keep &= (np.abs(residual) <= 3.0 * spread) & (np.einsum("ij,ij->i", offsets, normals[:, :2]) > 0)
-    counts = np.bincount(slice_index[keep], minlength=slice_index.max() + 1)
-    keep &= counts[slice_index] >= settings.min_slice_points
-    if keep.sum() < settings.min_points:
-        return None
-    used, dense = np.unique(slice_index[keep], return_inverse=True)
-    centre, radii = _solve(points[keep], dense, len(used))
     rms = float(np.sqrt(np.mean((np.linalg.norm(points[keep, :2] - centre, axis=1) - radii[dense]) ** 2)))
     offsets = points[keep, :2] - centre
     arc = arc_span_deg(np.arctan2(offsets[:, 1], offsets[:, 0]))
