@@ -60,6 +60,10 @@ class ReconstructionNode(Node):
             ),
         )
         visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
+        snap = declare(self, "snap_to_depth", True, "Place the seen part of each surface on the observed depth")
+        revolutions = declare(
+            self, "complete_revolutions", True, "Complete upright solids of revolution from their seen side wall"
+        )
         reliability = declare(
             self,
             "frame_reliability",
@@ -80,6 +84,8 @@ class ReconstructionNode(Node):
             remove_intersections=cut,
             decomposition=decomposition,
             estimate_visibility=visibility,
+            snap_to_depth=snap,
+            complete_revolutions=revolutions,
             table_height_m=table_height if fixed_table else None,
         )
         try:
