@@ -12,7 +12,7 @@ from arm_benchmarks.recon.physics import scene_stability
 from arm_benchmarks.recon.plots import plot_by_visibility, plot_qualitative, plot_stability
 from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
-from arm_benchmarks.recon.summary import summarise, visibility_bin
+from arm_benchmarks.recon.summary import priors_earn_their_place, summarise, visibility_bin
 from arm_planner.twin import TwinObject
 from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
 from arm_reconstruction.train import train
@@ -215,12 +215,18 @@ def test_summary_and_targets_follow_the_measurements():
     targets = summary["targets"]
     assert targets["arm_chamfer_reduction_vs_baseline"]["value"] == pytest.approx(0.5)
     assert targets["arm_chamfer_reduction_vs_baseline"]["met"]
-    assert targets["arm_lower_chamfer_every_bin_below_0.6"]["value"] == {
+    assert targets["arm_lower_chamfer_every_bin"]["value"] == {
         "0.0-0.2": True,
         "0.2-0.4": None,
         "0.4-0.6": None,
+        "0.6-0.8": None,
+        "0.8-1.0": True,
     }
-    assert not targets["arm_lower_chamfer_every_bin_below_0.6"]["met"], "bins without objects are not met"
+    assert not targets["arm_lower_chamfer_every_bin"]["met"], "bins without objects are not met"
+    assert targets["arm_chamfer_m"]["value"] == pytest.approx(0.006) and not targets["arm_chamfer_m"]["met"]
+    assert targets["arm_chamfer_m_visible_0.8_1.0"]["value"] == pytest.approx(0.002)
+    assert targets["arm_chamfer_m_visible_0.8_1.0"]["met"]
+    assert targets["priors_earn_their_place"] == {"value": None, "met": None}, "no arm-c-s in this run"
     assert not targets["arm_stable_fraction"]["met"]
     assert targets["arm_stable_gap_to_ground_truth"]["value"] == pytest.approx(0.5)
     truth, arm = methods["ground-truth"], methods["arm"]
@@ -252,3 +258,24 @@ def test_plots_and_report_are_written(tmp_path):
     assert all((tmp_path / f).stat().st_size > 1000 for f in ("a.png", "b.png", "c.png"))
     report = (tmp_path / "report.md").read_text()
     assert "| arm | 2 | 0 | 6.00" in report and "| 0.0-0.2 | 1 | 20.00 | 10.00 | 50.0% |" in report
+
+
+def test_priors_earn_their_place_needs_disjoint_intervals():
+    arm = {
+        "status": "ok",
+        "chamfer_m": 0.006,
+        "chamfer_m_ci90": [0.0055, 0.0065],
+        "stable_fraction": 0.9,
+        "stable_ci90": [0.85, 0.94],
+    }
+    close = {
+        "status": "ok",
+        "chamfer_m": 0.0066,
+        "chamfer_m_ci90": [0.006, 0.0072],
+        "stable_fraction": 0.88,
+        "stable_ci90": [0.83, 0.92],
+    }
+    far = {**close, "chamfer_m": 0.008, "chamfer_m_ci90": [0.0075, 0.0085]}
+    assert not priors_earn_their_place(arm, close)["met"]
+    assert priors_earn_their_place(arm, far)["met"]
+    assert not priors_earn_their_place({**arm, "stable_fraction": 0.8}, far)["met"], "worse on stability"

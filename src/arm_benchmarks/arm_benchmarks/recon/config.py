@@ -22,7 +22,11 @@ QUALITATIVE_PER_SCENE = 2
 QUALITATIVE_MAX_VISIBILITY = 0.5
 TARGET_CHAMFER_REDUCTION = 0.28
 TARGET_STABLE_FRACTION = 0.9
-TARGET_STABLE_GAP = 0.05
+TARGET_STABLE_GAP = 0.03
+TARGET_ARM_CHAMFER_M = 0.005
+TARGET_ARM_CHAMFER_VISIBLE_M = 0.004  # visible fraction 0.8-1.0
+TARGET_ARM_IOU = 0.5
+TARGET_NORMAL_CONSISTENCY = 0.85
 TARGET_RUNTIME_S = 900.0
 # Every package whose code changes a per-scene result (the renderer, the segmentation, the pipeline,
 # the twin's convex parts, this benchmark's scoring).
