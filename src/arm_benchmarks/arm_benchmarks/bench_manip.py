@@ -236,6 +236,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
+    parser.add_argument("--plan-every", type=int, default=1, help="MPPI step every this many control steps (paper: 1)")
     parser.add_argument(
         "--node-twin",
         action="store_true",
@@ -248,8 +249,8 @@ def main(argv=None) -> int:
         args.methods = [benchmark_method(m) for m in args.methods]
     except ValueError as error:
         parser.error(f"{error}, or {GROUND_TRUTH}")
-    if args.num_paths < 2:
-        parser.error("--num-paths must be >= 2")
+    if args.num_paths < 2 or args.plan_every < 1:
+        parser.error("--num-paths must be >= 2 and --plan-every >= 1")
 
     torch.set_num_threads(2)
     out = pathlib.Path(args.out)
@@ -268,6 +269,7 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.mppi.num_paths = args.num_paths
+    config.plan_every_steps = args.plan_every
     config.merge_other_objects = config.rest_creeping_every_step = args.node_twin
     config.close_steps = args.close_steps
     budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
@@ -289,8 +291,8 @@ def main(argv=None) -> int:
         "nthread": args.nthread,
         "domain": args.domain,
     }
-    if args.num_paths != 25 or args.node_twin:  # keys of earlier runs stay valid
-        settings |= {"num_paths": args.num_paths, "node_twin": args.node_twin}
+    if args.num_paths != 25 or args.node_twin or args.plan_every != 1:  # keys of earlier runs stay valid
+        settings |= {"num_paths": args.num_paths, "node_twin": args.node_twin, "plan_every": args.plan_every}
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(

@@ -69,6 +69,9 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         100.0,
     )
     config.min_paths = declare(node, "min_paths", 8, "Fewest paths per step when planning in real time", 2, 1000)
+    config.plan_every_steps = declare(
+        node, "plan_every_steps", 2, "MPPI step every this many control steps (paper: 1)", 1, 10
+    )
     task_steps = {
         task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
         for task, steps in DEFAULT_TASK_STEPS.items()
