@@ -240,7 +240,13 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--node-twin",
         action="store_true",
-        help="plan_node's cheaper twin: other objects one convex hull each, creeping untouched objects put to rest",
+        help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
+    )
+    parser.add_argument(
+        "--merge-other-objects", action="store_true", help="objects but the target one convex hull each"
+    )
+    parser.add_argument(
+        "--rest-creeping", action="store_true", help="creeping objects the robot does not touch put to rest every step"
     )
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
@@ -270,7 +276,8 @@ def main(argv=None) -> int:
     config.mppi.nthread = args.nthread
     config.mppi.num_paths = args.num_paths
     config.plan_every_steps = args.plan_every
-    config.merge_other_objects = config.rest_creeping_every_step = args.node_twin
+    config.merge_other_objects = args.node_twin or args.merge_other_objects
+    config.rest_creeping_every_step = args.node_twin or args.rest_creeping
     config.close_steps = args.close_steps
     budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
@@ -291,8 +298,13 @@ def main(argv=None) -> int:
         "nthread": args.nthread,
         "domain": args.domain,
     }
-    if args.num_paths != 25 or args.node_twin or args.plan_every != 1:  # keys of earlier runs stay valid
-        settings |= {"num_paths": args.num_paths, "node_twin": args.node_twin, "plan_every": args.plan_every}
+    if args.num_paths != 25 or args.plan_every != 1 or config.merge_other_objects or config.rest_creeping_every_step:
+        settings |= {  # only then: keys of earlier runs stay valid
+            "num_paths": args.num_paths,
+            "plan_every": args.plan_every,
+            "merge_other_objects": config.merge_other_objects,
+            "rest_creeping": config.rest_creeping_every_step,
+        }
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(
