@@ -236,7 +236,6 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
-    parser.add_argument("--plan-every", type=int, default=1, help="MPPI step every this many control steps (paper: 1)")
     parser.add_argument(
         "--node-twin",
         action="store_true",
@@ -255,8 +254,8 @@ def main(argv=None) -> int:
         args.methods = [benchmark_method(m) for m in args.methods]
     except ValueError as error:
         parser.error(f"{error}, or {GROUND_TRUTH}")
-    if args.num_paths < 2 or args.plan_every < 1:
-        parser.error("--num-paths must be >= 2 and --plan-every >= 1")
+    if args.num_paths < 2:
+        parser.error("--num-paths must be >= 2")
 
     torch.set_num_threads(2)
     out = pathlib.Path(args.out)
@@ -275,7 +274,6 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.mppi.num_paths = args.num_paths
-    config.plan_every_steps = args.plan_every
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
     config.close_steps = args.close_steps
@@ -298,10 +296,9 @@ def main(argv=None) -> int:
         "nthread": args.nthread,
         "domain": args.domain,
     }
-    if args.num_paths != 25 or args.plan_every != 1 or config.merge_other_objects or config.rest_creeping_every_step:
+    if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step:
         settings |= {  # only then: keys of earlier runs stay valid
             "num_paths": args.num_paths,
-            "plan_every": args.plan_every,
             "merge_other_objects": config.merge_other_objects,
             "rest_creeping": config.rest_creeping_every_step,
         }

@@ -149,7 +149,9 @@ def _serve(client: GraphClient, task: str, targets: list[int], processes: dict) 
     return {"task": task, "error": "no reachable target was planned for", "failures": failures}
 
 
-def run_seed(seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClient) -> dict:
+def run_seed(
+    seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClient, planner_params: dict | None = None
+) -> dict:
     sim_time = {"use_sim_time": True}
     processes = {
         "sim": NodeProcess(
@@ -160,7 +162,7 @@ def run_seed(seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClie
         "segmentation", log_dir / "segmentation.log", params=sim_time | {"image_reliability": "reliable"}
     )
     processes["reconstruction"] = NodeProcess("reconstruction", log_dir / "reconstruction.log", params=sim_time)
-    processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=sim_time)
+    processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=sim_time | (planner_params or {}))
     rows = []
     try:
         client.meshes, client.planner_diag = None, {}
@@ -209,7 +211,8 @@ def _summary(runs: list[dict]) -> dict:
     return figures
 
 
-def measure(seeds=(7, 3), n_objects: int = 10) -> dict:
+def measure(seeds=(7, 3), n_objects: int = 10, planner_params: dict | None = None) -> dict:
+    """planner_params: plan_node parameters other than its defaults (for comparisons)."""
     root = pathlib.Path(os.environ.get("ARM_ROOT") or pathlib.Path.cwd())
     rclpy.init()
     node = rclpy.create_node("perf_planner_graph")
@@ -217,14 +220,16 @@ def measure(seeds=(7, 3), n_objects: int = 10) -> dict:
     runs = []
     try:
         for seed in seeds:
-            runs.append(run_seed(seed, n_objects, root / "log" / "perf_planner_graph" / f"seed{seed}", client))
+            log_dir = root / "log" / "perf_planner_graph" / f"seed{seed}"
+            runs.append(run_seed(seed, n_objects, log_dir, client, planner_params))
             print(json.dumps(runs[-1]), flush=True)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
     figures = _summary(runs)
     figures["planner_graph_config"] = (
-        f"sim_node 640x480 n_objects {n_objects} + segmentation + reconstruction + plan_node (defaults, stream "
-        f"on), seeds {list(seeds)}, {os.cpu_count()} cores; first grasp with segmentation/reconstruction stopped"
+        f"sim_node 640x480 n_objects {n_objects} + segmentation + reconstruction + plan_node "
+        f"({planner_params or 'defaults'}, stream on), seeds {list(seeds)}, {os.cpu_count()} cores; first grasp "
+        "with segmentation/reconstruction stopped"
     )
     return figures

@@ -319,16 +319,10 @@ class Mppi:
         weights = np.where(finite, np.exp((np.where(finite, returns, best) - best) / (cfg.temperature * spread)), 0.0)
         weights /= weights.sum()
         self.nominal = np.einsum("n,nhu->hu", weights, rates)
-        return StepResult(control=self.next_control(previous, fixed), returns=returns, weights=weights)
-
-    def next_control(self, previous_control: np.ndarray, fixed_controls: dict[int, float] | None = None) -> np.ndarray:
-        """The nominal sequence's first control from `previous_control`, without sampling: what step()
-        returns, and what a plan reused for several control steps executes between steps (after shift())."""
-        previous = np.asarray(previous_control, dtype=np.float64)
-        control = self.limits.integrate(previous, self.nominal[None, :1], self.config.control_dt_s)[0, 0]
-        for a, value in (fixed_controls or {}).items():
+        control = self.limits.integrate(previous, self.nominal[None, :1], cfg.control_dt_s)[0, 0]
+        for a, value in fixed.items():
             control[a] = value
-        return control
+        return StepResult(control=control, returns=returns, weights=weights)
 
     def shift(self) -> None:
         """Warm start: drop the executed first rate, repeat the last one."""

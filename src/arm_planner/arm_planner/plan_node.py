@@ -55,23 +55,20 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
     config.rest_creeping_every_step = declare(
-        node, "rest_creeping_every_step", True, "Put creeping objects the robot does not touch to rest every step"
+        node, "rest_creeping_every_step", False, "Put creeping objects the robot does not touch to rest every step"
     )
     config.merge_other_objects = declare(
-        node, "merge_other_objects", True, "Cheaper twin: every object but the target as one convex hull"
+        node, "merge_other_objects", False, "Cheaper twin: every object but the target as one convex hull"
     )
     config.realtime_factor = declare(
         node,
         "realtime_factor",
-        0.9,
+        0.0,
         "Planning wall time per planned motion time the path count adapts to (0: always num_paths)",
         0.0,
         100.0,
     )
     config.min_paths = declare(node, "min_paths", 8, "Fewest paths per step when planning in real time", 2, 1000)
-    config.plan_every_steps = declare(
-        node, "plan_every_steps", 2, "MPPI step every this many control steps (paper: 1)", 1, 10
-    )
     task_steps = {
         task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
         for task, steps in DEFAULT_TASK_STEPS.items()

@@ -94,9 +94,6 @@ class PlannerConfig:
     # min_paths. Outcomes then depend on the machine's load, so benchmarks leave it off.
     realtime_factor: float = 0.0
     min_paths: int = 8
-    # MPPI iterations every this many control steps (paper: 1); in between the warm-started nominal
-    # sequence is executed as planned, which divides the planning cost by this factor.
-    plan_every_steps: int = 1
     # Physics time the twin is settled for (robot holding still) before planning.
     settle_s: float = 0.3
     # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
@@ -314,25 +311,21 @@ class Planner:
                 message = "stopped"
                 break
             t0, c0 = time.perf_counter(), time.process_time()
-            plans = step % max(1, cfg.plan_every_steps) == 0
-            if path_budget is not None and plans and step > 0:  # the whole span since the last MPPI step
-                paths = path_budget.update(paths, (t0 - iteration_start) / max(1, cfg.plan_every_steps))
+            if path_budget is not None and step > 0:  # the whole previous iteration, not just its MPPI step
+                paths = path_budget.update(paths, t0 - iteration_start)
+            iteration_start = t0
+            state = get_state(model, data)
             gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
             fixed = {int(robot.gripper_actuator): gripper}
-            if plans:
-                iteration_start = t0
-                result = self.mppi.step(get_state(model, data), ctrl, reward, self.noise_basis(data), fixed, paths)
-                self._last_ret, self._last_w = result.returns, result.weights
-                control = result.control
-                step_ms.append(1e3 * (time.perf_counter() - t0))
-                step_cpu_ms.append(1e3 * (time.process_time() - c0))
-                step_paths.append(paths)
-            else:
-                control = self.mppi.next_control(ctrl, fixed)
-            for target in self.mppi.rollout.substep_controls(ctrl, control[None, None])[0]:
+            result = self.mppi.step(state, ctrl, reward, self.noise_basis(data), fixed, num_paths=paths)
+            step_ms.append(1e3 * (time.perf_counter() - t0))
+            step_cpu_ms.append(1e3 * (time.process_time() - c0))
+            step_paths.append(paths)
+            self._last_ret, self._last_w = result.returns, result.weights
+            for target in self.mppi.rollout.substep_controls(ctrl, result.control[None, None])[0]:
                 data.ctrl[:] = target
                 mujoco.mj_step(model, data)
-            ctrl = control
+            ctrl = result.control
             if not np.all(np.isfinite(data.qpos)):
                 message = f"twin physics diverged at step {step}"
                 met, error = False, float("inf")

@@ -76,15 +76,3 @@ def test_realtime_planning_samples_fewer_paths_when_steps_are_slow():
     result = fixed.plan(state, PlanRequest("push", "object_0", np.array([0.05, -0.2, 0.0])), geometry)
     assert np.all(result.step_paths == fixed.config.mppi.num_paths)
     fixed.close()
-
-
-def test_a_plan_reused_for_two_control_steps_still_meets_the_task():
-    planner, state, geometry = _setup()
-    planner.config.plan_every_steps = 2
-    result = planner.plan(state, PlanRequest("grasp", "object_0", np.zeros(3)), geometry)
-    assert result.success, result.message
-    assert len(result.step_ms) == (len(result.times_s) + 1) // 2
-    limits, arm = planner.limits, planner.robot.arm_actuators
-    steps = np.abs(np.diff(result.controls[:, arm], axis=0))
-    assert np.all(steps <= limits.max_rate[arm] * planner.config.mppi.control_dt_s + 1e-9)
-    planner.close()
