@@ -276,6 +276,7 @@ def main(argv=None) -> int:
     config.mppi.num_paths = args.num_paths
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
+    config.sleep_tolerance = args.sleep_tolerance
     config.close_steps = args.close_steps
     budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
@@ -296,11 +297,12 @@ def main(argv=None) -> int:
         "nthread": args.nthread,
         "domain": args.domain,
     }
-    if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step:
+    if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step or args.sleep_tolerance:
         settings |= {  # only then: keys of earlier runs stay valid
             "num_paths": args.num_paths,
             "merge_other_objects": config.merge_other_objects,
             "rest_creeping": config.rest_creeping_every_step,
+            "sleep_tolerance": args.sleep_tolerance,
         }
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)

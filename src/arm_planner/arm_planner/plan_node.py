@@ -57,6 +57,9 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.rest_creeping_every_step = declare(
         node, "rest_creeping_every_step", False, "Put creeping objects the robot does not touch to rest every step"
     )
+    config.sleep_tolerance = declare(
+        node, "sleep_tolerance", 0.0, "Twin objects slower than this sleep until touched (0: MuJoCo's 1e-3)", 0.0, 1.0
+    )
     config.merge_other_objects = declare(
         node, "merge_other_objects", False, "Cheaper twin: every object but the target as one convex hull"
     )

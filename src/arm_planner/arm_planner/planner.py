@@ -86,6 +86,9 @@ class PlannerConfig:
     # (velocity zeroed, sleeping in the rollouts): reconstructed objects resting against each other
     # otherwise jitter awake, and their contacts cost most of every rollout.
     rest_creeping_every_step: bool = False
+    # MuJoCo's sleep tolerance for the twin (0: MuJoCo's default, 1e-3); a larger one lets reconstructed
+    # objects that jitter against each other fall asleep on their own (woken by any awake contact).
+    sleep_tolerance: float = 0.0
     # Cheaper twin: every object but the target is one convex hull (its parts merged); their part-part
     # contacts in a pile of reconstructed objects otherwise cost most of every rollout.
     merge_other_objects: bool = False
@@ -284,6 +287,8 @@ class Planner:
         reward = self._last_reward = self._reward(request, geometry)
         if cfg.sleep_objects:
             set_sleep(model, self._object_trees, start_asleep=False)
+            if cfg.sleep_tolerance > 0:
+                model.opt.sleep_tolerance = cfg.sleep_tolerance
         mujoco.mj_resetData(model, data)
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
         ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], reward.gripper_closed, model.nu)
