@@ -241,6 +241,7 @@ def main(argv=None) -> int:
         action="store_true",
         help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
     )
+    parser.add_argument("--sleep-tolerance", type=float, default=0.0, help="twin sleep tolerance, m/s (0: MuJoCo's)")
     parser.add_argument(
         "--merge-other-objects", action="store_true", help="objects but the target one convex hull each"
     )
