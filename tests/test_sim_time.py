@@ -36,7 +36,9 @@ def test_segmentation_on_sim_time_stamps_its_outputs_with_the_sim_clock(tmp_path
             with probe.lock:
                 return [d for d in diagnostics if any(s.name.startswith("segmentation_node") for s in d.status)]
 
-        done = probe.wait_until(lambda: len(frames) >= 2 and len(segmentation_diagnostics()) >= 2, 120.0, poll_s=0.2)
+        done = probe.wait_until(
+            lambda: len(frames) >= 2 and len(segmentation_diagnostics()) >= 2 and len(clock) > 0, 120.0, poll_s=0.2
+        )
         alive = {n.key: n.alive() for n in nodes}
         with probe.lock:
             clock_s = [seconds(c.clock) for c in clock]
