@@ -59,6 +59,6 @@ def tiny_train_config(data_root, out_path, variant="arm", steps=3, **overrides):
 def write_box_dataset(root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0):
     for shard_seed in range(shards):
         rng = np.random.default_rng([seed, shard_seed])
-        arrays = datagen._to_arrays(box_samples(per_shard, resolution, rng), shard_seed, split, resolution, 4.0)
+        arrays = datagen._to_arrays(box_samples(per_shard, resolution, rng), shard_seed, split, resolution, 4.0, "boxes")
         datagen.write_shard(datagen.shard_path(root, split, shard_seed), arrays)
     return datagen.write_manifest(root, split, {"synthetic": "boxes"})

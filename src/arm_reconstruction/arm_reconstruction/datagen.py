@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write, atomic_write_json
-from arm_reconstruction.grid import frame_grids, voxelize_mesh
+from arm_reconstruction.grid import DEFAULT_K, frame_grids, voxelize_mesh
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 from arm_sim.views import BenchmarkScene
@@ -63,7 +63,7 @@ def generate_shard(
     seed: int,
     split: str = "train",
     resolution: int = 32,
-    k: float = 4.0,
+    k: float = DEFAULT_K,
     scenes_per_shard: int = 1,
     views_per_scene: int = 8,
     min_visible_pixels: int = MIN_VISIBLE_PIXELS,
@@ -107,7 +107,7 @@ def generate_shard(
                     columns["voxel_size_m"].append(grid_frame.voxel_size_m)
                     columns["table_height_m"].append(grid_frame.table_height_m)
                     columns["T_world_camera"].append(frame.T_world_camera)
-    return _to_arrays(columns, seed, split, resolution, k)
+    return _to_arrays(columns, seed, split, resolution, k, domain)
 
 
 _SAMPLE_KEYS = (
@@ -128,7 +128,7 @@ _SAMPLE_KEYS = (
 )
 
 
-def _to_arrays(columns, seed, split, resolution, k) -> dict[str, np.ndarray]:
+def _to_arrays(columns, seed, split, resolution, k, domain) -> dict[str, np.ndarray]:
     d = int(resolution)
     n = len(columns["grids"])
     grids = np.stack(columns["grids"]) if n else np.zeros((0, 4, d, d, d), bool)
@@ -140,6 +140,7 @@ def _to_arrays(columns, seed, split, resolution, k) -> dict[str, np.ndarray]:
         "seed": np.array(int(seed)),
         "resolution": np.array(d),
         "k": np.array(float(k)),
+        "domain": np.array(domain),
         "grids_bits": pack_bits(grids),
         "occupancy_bits": pack_bits(occupancy),
         "others_bits": pack_bits(others),
@@ -271,7 +272,7 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes-per-shard", type=int, default=1)
     parser.add_argument("--views-per-scene", type=int, default=8)
     parser.add_argument("--resolution", type=int, default=32, help="grid side in voxels")
-    parser.add_argument("--k", type=float, default=4.0, help="grid side / observed object diameter")
+    parser.add_argument("--k", type=float, default=DEFAULT_K, help="grid side / observed object diameter")
     parser.add_argument("--min-visible-pixels", type=int, default=MIN_VISIBLE_PIXELS)
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     args = parser.parse_args(argv)

@@ -44,7 +44,7 @@ class VoxelDataset:
             verify_manifest(folder)
         parts: dict[str, list] = {"grids_bits": [], "occupancy_bits": [], "others_bits": []}
         parts.update({key: [] for key in _PER_SAMPLE})
-        resolution = None
+        resolution, k = None, None
         self.shards: list[tuple[str, int]] = []
         self.seeds: list[int] = []
         for path in paths:
@@ -55,11 +55,16 @@ class VoxelDataset:
                 if resolution not in (None, d):
                     raise DatasetError(f"{path} has resolution {d}, other shards {resolution}")
                 resolution = d
+                shard_k = float(shard["k"])
+                if k not in (None, shard_k):
+                    raise DatasetError(f"{path} has grid k {shard_k}, other shards {k}")
+                k = shard_k
                 for key in parts:
                     parts[key].append(shard[key])
                 self.shards.append((path.name, int(len(shard["visible_fraction"]))))
                 self.seeds.append(int(shard["seed"]))
         self.resolution = int(resolution)
+        self.k = float(k)  # grid side over the observed object diameter
         self.split = split
         arrays = {key: np.concatenate(value) for key, value in parts.items()}
         if max_samples is not None:

@@ -24,7 +24,8 @@ from .object_depth import object_depth_average
 
 CHANNELS = ("own", "others", "observed_empty", "unobserved")
 DEFAULT_RESOLUTION = 32
-DEFAULT_K = 4.0
+DEFAULT_K = 2.0  # grids of new training data and checkpoints; see CHECKPOINT_DEFAULT_K
+CHECKPOINT_DEFAULT_K = 4.0  # the grid of checkpoints that do not record theirs (trained before grid_k was saved)
 MIN_OBJECT_POINTS = 10
 MIN_DIAMETER_M = 0.01
 SUPPORT_BIN_M = 0.005

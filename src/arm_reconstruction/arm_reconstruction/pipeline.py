@@ -19,7 +19,7 @@ from arm_core.camera import silhouette
 
 from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
 from .convex_parts import ConvexDecomposer, DecompositionSettings
-from .grid import DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
+from .grid import CHECKPOINT_DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
 from .meshing import (
     DEFAULT_MIN_COMPONENT_VOXELS,
     DEFAULT_SMOOTHING_ITERATIONS,
@@ -100,7 +100,7 @@ class ReconstructedObject:
 class ReconstructionSettings:
     """method: one of network.METHODS; checkpoint_path '' = the shipped checkpoint of the method's
     network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
-    over object diameter; threshold: occupancy probability of a solid voxel; table_height_m None =
+    over object diameter, 0 = the checkpoint's (the k of its training data); threshold: occupancy probability of a solid voxel; table_height_m None =
     estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
     (surface_snapping), with snap settings `snap`; complete_revolutions: an object whose seen points
     lie on an upright solid of revolution that agrees with the view becomes that solid (revolution)."""
@@ -109,7 +109,7 @@ class ReconstructionSettings:
     checkpoint_path: str = ""
     device: str = "cpu"
     resolution: int = 0
-    k: float = DEFAULT_K
+    k: float = 0.0
     threshold: float = DEFAULT_THRESHOLD
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
@@ -130,8 +130,8 @@ class ReconstructionSettings:
             raise ValueError(f"threshold must be in (0, 1), got {self.threshold}")
         if int(self.resolution) < 0 or int(self.resolution) % 8:
             raise ValueError(f"resolution must be 0 (from the checkpoint) or a multiple of 8, got {self.resolution}")
-        if not np.isfinite(self.k) or self.k <= 1:
-            raise ValueError(f"k must be > 1, got {self.k}")
+        if not np.isfinite(self.k) or (self.k != 0 and self.k <= 1):
+            raise ValueError(f"k must be 0 (from the checkpoint) or > 1, got {self.k}")
         if int(self.batch_size) < 1:
             raise ValueError(f"batch_size must be >= 1, got {self.batch_size}")
 
@@ -201,6 +201,7 @@ class Reconstructor:
         self.resolution = int(self.settings.resolution or getattr(model, "resolution", 32))
         if getattr(model, "resolution", self.resolution) != self.resolution:
             raise CheckpointError(f"model resolution {model.resolution} differs from requested {self.resolution}")
+        self.k = float(self.settings.k or self.checkpoint_config.get("grid_k", CHECKPOINT_DEFAULT_K))
         self.decomposer = ConvexDecomposer(self.settings.decomposition)
         self.timer = StageTimer()
 
@@ -228,7 +229,7 @@ class Reconstructor:
     def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
         s = self.settings
         with self.timer("grid"):
-            return frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, s.k, s.table_height_m)
+            return frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, self.k, s.table_height_m)
 
     def predict(self, grids: FrameGrids) -> np.ndarray:
         """Occupancy probabilities [N, d, d, d] of the frame's grids, after the method's post-processing

@@ -43,7 +43,7 @@ class ReconstructionNode(Node):
         checkpoint = declare(self, "checkpoint_path", "", "Checkpoint file; '' = shipped checkpoint of the method")
         device = declare(self, "device", "cpu", "Torch device", choices=["cpu", "cuda", "auto"])
         resolution = declare(self, "resolution", 0, "Voxels per grid side; 0 = the checkpoint's", 0, 256)
-        k = declare(self, "k", 4.0, "Grid side over the object's observed diameter", 1.5, 16.0)
+        k = declare(self, "k", 0.0, "Grid side over the object's observed diameter; 0 = the checkpoint's", 0.0, 16.0)
         threshold = declare(self, "threshold", 0.5, "Occupancy probability of a solid voxel", 0.01, 0.99)
         min_component = declare(self, "min_component_voxels", 4, "Drop occupied components smaller than this", 1, 4096)
         cut = declare(self, "remove_intersections", True, "Cut overlaps from the larger of two meshes")

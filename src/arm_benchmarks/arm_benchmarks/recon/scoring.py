@@ -204,7 +204,7 @@ def evaluate_scene(index: int, config: BenchConfig, pool, reconstructors: dict) 
     for name, reconstructor in reconstructors.items():
         tick = time.perf_counter()
         reconstructor.timer.reset()
-        key = (reconstructor.resolution, reconstructor.settings.k, reconstructor.settings.table_height_m)
+        key = (reconstructor.resolution, reconstructor.k, reconstructor.settings.table_height_m)
         if key not in grids_cache:
             grids_cache[key] = reconstructor.grids(
                 frame.depth_m, frame.K, frame.T_world_camera, labels, reconstruct_ids

@@ -137,9 +137,9 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
                 break
             tick = time.perf_counter()
             batch = train_set.batch(rng.choice(len(train_set), per_process_batch, replace=False))
+            batch = {key: value.to(device, non_blocking=True) for key, value in batch.items()}
             if config.augment:
                 batch = random_symmetry(batch, augment_generator)
-            batch = {key: value.to(device, non_blocking=True) for key, value in batch.items()}
             inputs = select_input_channels(batch["grids"], VARIANTS[config.variant])
             logits = train_model(inputs.contiguous(memory_format=memory_format))
             terms = losses_for_batch(logits, batch, config)
@@ -190,7 +190,7 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
     save_checkpoint(
         config.out,
         model,
-        config={"training": dataclasses.asdict(config)},
+        config={"training": dataclasses.asdict(config), "grid_k": train_set.k},
         extra={
             **result,
             "weights_dtype": "float16" if config.save_float16 else "float32",
