@@ -7,6 +7,7 @@
 set -euo pipefail
 data=$1 runs=$2 train_shards=$3 test_shards=$4 minutes=$5
 workers=$(nproc)
+mkdir -p "$runs"
 realistic=$((train_shards * 4 / 5))
 gen() { python -m arm_reconstruction.datagen --out "$data" --workers "$workers" "$@" | tail -n 3; }
 gen --split test --shards "$test_shards" --domain realistic
