@@ -97,7 +97,7 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
         elapsed_s = state["elapsed_s"]
         if rank < len(state["numpy_rng"]):
             rng.bit_generator.state = state["numpy_rng"][rank]
-        augment_generator.set_state(state["augment_rng"])
+        augment_generator.set_state(state["augment_rng"].cpu())
     train_model = model
     if world > 1:
         ids = [device.index] if device.type == "cuda" else None
