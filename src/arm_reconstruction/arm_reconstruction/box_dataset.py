@@ -56,9 +56,11 @@ def tiny_train_config(data_root, out_path, variant="arm", steps=3, **overrides):
     return TrainConfig(**values)
 
 
-def write_box_dataset(root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0):
-    for shard_seed in range(shards):
+def write_box_dataset(
+    root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0, k: float = 4.0, first_shard: int = 0
+):
+    for shard_seed in range(first_shard, first_shard + shards):
         rng = np.random.default_rng([seed, shard_seed])
-        arrays = datagen._to_arrays(box_samples(per_shard, resolution, rng), shard_seed, split, resolution, 4.0, "boxes")
+        arrays = datagen._to_arrays(box_samples(per_shard, resolution, rng), shard_seed, split, resolution, k, "boxes")
         datagen.write_shard(datagen.shard_path(root, split, shard_seed), arrays)
     return datagen.write_manifest(root, split, {"synthetic": "boxes"})

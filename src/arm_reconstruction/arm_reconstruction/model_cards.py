@@ -12,6 +12,7 @@ import argparse
 import pathlib
 
 from arm_reconstruction.checkpoint import read_checkpoint
+from arm_reconstruction.grid import CHECKPOINT_DEFAULT_K
 
 _METRIC_NAMES = {
     "iou": "voxel IoU (threshold 0.5)",
@@ -46,6 +47,7 @@ def model_card(checkpoint_path, note: str = "") -> str:
         f"| network | {config['architecture']}, {config['in_channels']} input channels, "
         f"{config['resolution']}^3 grid, {config['base_channels']} base channels, weights stored as "
         f"{extra.get('weights_dtype', 'float32')} |",
+        f"| grid | side {config.get('grid_k', CHECKPOINT_DEFAULT_K):g} x the object's observed diameter |",
         f"| training data | {extra.get('train_samples', '?')} samples from {extra.get('train_shards', '?')} "
         f"shards of split `{training.get('train_split', '?')}` (training categories) in `{training.get('data', '?')}`"
         f"{_seed_text(extra.get('train_seeds'))} |",

@@ -19,7 +19,7 @@ def test_dataset_batches_match_what_was_written(tmp_path):
     manifest = write_box_dataset(tmp_path, "train", shards=2, per_shard=5)
     assert manifest["n_samples"] == 10 and manifest["n_shards"] == 2
     dataset = VoxelDataset(tmp_path, "train", verify=True)
-    assert len(dataset) == 10 and dataset.resolution == 16 and dataset.seeds == [0, 1]
+    assert len(dataset) == 10 and dataset.resolution == 16 and dataset.seeds == [0, 1] and dataset.k == 4.0
     expected = box_samples(5, 16, np.random.default_rng([0, 1]))
     batch = dataset.batch([5, 9])
     assert batch["grids"].shape == (2, 4, 16, 16, 16) and batch["grids"].dtype == torch.float32
@@ -38,6 +38,13 @@ def test_manifest_detects_tampered_shards(tmp_path):
         verify_manifest(tmp_path / "train")
     manifest = json.loads((tmp_path / "train" / "manifest.json").read_text())
     assert manifest["shards"][0]["samples"] == 2
+
+
+def test_shards_of_different_grids_are_refused(tmp_path):
+    write_box_dataset(tmp_path, "train", shards=1, per_shard=2, k=2.0)
+    write_box_dataset(tmp_path, "train", shards=1, per_shard=2, k=4.0, first_shard=1)
+    with pytest.raises(DatasetError, match="grid k"):
+        VoxelDataset(tmp_path, "train")
 
 
 def test_missing_split_raises(tmp_path):

@@ -144,12 +144,14 @@ def test_one_call_api(sim, checkpoints):
 
 @pytest.mark.slow
 def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path):
-    write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0)
-    write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1)
+    write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0, k=3.0)
+    write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1, k=3.0)
     train(tiny_train_config(tmp_path, tmp_path / "arm.pt", "arm", steps=2), progress=False)
     _, frame = sim
     reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt")))
     assert reconstructor.resolution == 16 and reconstructor.checkpoint_config["base_channels"] == 8
+    assert reconstructor.k == 3.0, "the grid of the checkpoint's training data"
+    assert Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt"), k=2.5)).k == 2.5
     objects = reconstructor(*args(frame))
     assert [o.id for o in objects] == sorted(int(i) for i in np.unique(frame.labels) if i > 0)
     assert all(o.grid.resolution == 16 for o in objects)

@@ -189,6 +189,7 @@ class SimWorld:
             self._geom_shiny[:n_geom][on_object] = [looks[k].shiny for k in object_of_geom[on_object]]
         self.artefacts = SensorArtefacts()
         self._renderer = None
+        self._segmentation_renderer = None
         if robot_arm:
             self._joint_qpos = np.array([self.model.joint(n).qposadr[0] for n in robot.JOINT_NAMES])
             self._finger_qpos = np.array([self.model.joint(n).qposadr[0] for n in robot.FINGER_JOINT_NAMES])
@@ -258,6 +259,9 @@ class SimWorld:
             for flag in (flags.mjRND_SHADOW, flags.mjRND_REFLECTION, flags.mjRND_SKYBOX):
                 self._renderer.scene.flags[flag] = False
             self._renderer.scene.flags[flags.mjRND_SHADOW] = self.appearance is not None and self.appearance.shadows
+        if self._segmentation_renderer is None:
+            self._segmentation_renderer = _single_sample_renderer(self.model, self.height, self.width)
+            self._segmentation_renderer.enable_segmentation_rendering()
         r = self._renderer
         self._place_camera(np.asarray(T_world_camera, dtype=np.float64))
         r.update_scene(self.data, camera=self._camera_id)
@@ -265,9 +269,8 @@ class SimWorld:
         r.enable_depth_rendering()
         depth = r.render().astype(np.float32)
         r.disable_depth_rendering()
-        r.enable_segmentation_rendering()
-        seg = r.render()
-        r.disable_segmentation_rendering()
+        self._segmentation_renderer.update_scene(self.data, camera=self._camera_id)
+        seg = self._segmentation_renderer.render()
         geom = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
         labels = self._geom_label[geom]
         noise = DepthNoise() if noise is None else noise
@@ -297,6 +300,18 @@ class SimWorld:
         return fractions
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        for renderer in (self._renderer, self._segmentation_renderer):
+            if renderer is not None:
+                renderer.close()
+        self._renderer = self._segmentation_renderer = None
+
+
+def _single_sample_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """A renderer without multisampling, for segmentation: with it, some drivers (NVIDIA's EGL) blend
+    the id colours of neighbouring geoms at their edges into ids that exist nowhere."""
+    samples = model.vis.quality.offsamples
+    model.vis.quality.offsamples = 0
+    try:
+        return mujoco.Renderer(model, height, width)
+    finally:
+        model.vis.quality.offsamples = samples
