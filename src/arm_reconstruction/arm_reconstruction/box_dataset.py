@@ -57,7 +57,14 @@ def tiny_train_config(data_root, out_path, variant="arm", steps=3, **overrides):
 
 
 def write_box_dataset(
-    root, split: str, shards: int, per_shard: int, resolution: int = 16, seed: int = 0, k: float = 4.0, first_shard: int = 0
+    root,
+    split: str,
+    shards: int,
+    per_shard: int,
+    resolution: int = 16,
+    seed: int = 0,
+    k: float = 4.0,
+    first_shard: int = 0,
 ):
     for shard_seed in range(first_shard, first_shard + shards):
         rng = np.random.default_rng([seed, shard_seed])

@@ -100,8 +100,8 @@ class ReconstructedObject:
 class ReconstructionSettings:
     """method: one of network.METHODS; checkpoint_path '' = the shipped checkpoint of the method's
     network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
-    over object diameter, 0 = the checkpoint's (the k of its training data); threshold: occupancy probability of a solid voxel; table_height_m None =
-    estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
+    over object diameter, 0 = the checkpoint's (the k of its training data); threshold: occupancy
+    probability of a solid voxel; table_height_m None = estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
     (surface_snapping), with snap settings `snap`; complete_revolutions: an object whose seen points
     lie on an upright solid of revolution that agrees with the view becomes that solid (revolution)."""
 
@@ -229,7 +229,9 @@ class Reconstructor:
     def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
         s = self.settings
         with self.timer("grid"):
-            return frame_grids(depth_m, K, T_world_camera, labels, object_ids, self.resolution, self.k, s.table_height_m)
+            return frame_grids(
+                depth_m, K, T_world_camera, labels, object_ids, self.resolution, self.k, s.table_height_m
+            )
 
     def predict(self, grids: FrameGrids) -> np.ndarray:
         """Occupancy probabilities [N, d, d, d] of the frame's grids, after the method's post-processing
