@@ -101,9 +101,10 @@ class ReconstructionSettings:
     """method: one of network.METHODS; checkpoint_path '' = the shipped checkpoint of the method's
     network variant; resolution 0 = the checkpoint's; device 'cpu', 'cuda' or 'auto'; k: grid side
     over object diameter, 0 = the checkpoint's (the k of its training data); threshold: occupancy
-    probability of a solid voxel; table_height_m None = estimated per object; snap_to_depth: the seen part of each surface placed on the observed depth
-    (surface_snapping), with snap settings `snap`; complete_revolutions: an object whose seen points
-    lie on an upright solid of revolution that agrees with the view becomes that solid (revolution)."""
+    probability of a solid voxel; table_height_m None = estimated per object; snap_to_depth: the
+    seen part of each surface placed on the observed depth (surface_snapping), with snap settings
+    `snap`; complete_revolutions: an object whose seen points lie on an upright solid of revolution
+    that agrees with the view becomes that solid (revolution)."""
 
     method: str = "arm"
     checkpoint_path: str = ""
