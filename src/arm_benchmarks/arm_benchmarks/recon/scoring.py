@@ -26,7 +26,7 @@ from arm_benchmarks.recon.scenes import (
 )
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
-from arm_reconstruction.grid import DEFAULT_RESOLUTION
+from arm_reconstruction.grid import DEFAULT_K, DEFAULT_RESOLUTION
 from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency, volumetric_iou
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor, StageTimer, resolve_checkpoint_path
@@ -41,6 +41,7 @@ class VisibleOnly(Reconstructor):
         self.settings = settings
         self.device = torch.device("cpu")
         self.resolution = int(settings.resolution or DEFAULT_RESOLUTION)
+        self.k = float(settings.k or DEFAULT_K)
         self.decomposer = ConvexDecomposer(settings.decomposition)
         self.timer = StageTimer()
         self.checkpoint_config = {}
@@ -86,8 +87,9 @@ def load_reconstructors(
     if VISIBLE_ONLY in methods:
         resolutions = [r.resolution for r in reconstructors.values()]
         resolution = reconstructors["arm"].resolution if "arm" in reconstructors else max(resolutions, default=0)
+        k = reconstructors["arm"].k if "arm" in reconstructors else DEFAULT_K
         only_settings = ReconstructionSettings(
-            method="baseline", resolution=resolution or DEFAULT_RESOLUTION, snap_to_depth=snap_to_depth
+            method="baseline", resolution=resolution or DEFAULT_RESOLUTION, k=k, snap_to_depth=snap_to_depth
         )
         only = VisibleOnly(only_settings)
         reconstructors = {VISIBLE_ONLY: only, **reconstructors}
