@@ -6,7 +6,14 @@ import torch
 
 from arm_reconstruction.box_dataset import box_samples, write_box_dataset
 from arm_reconstruction.datagen import pack_bits
-from arm_reconstruction.dataset import DatasetError, VoxelDataset, random_symmetry, unpack_bits, verify_manifest
+from arm_reconstruction.dataset import (
+    DatasetError,
+    VoxelDataset,
+    random_symmetry,
+    unpack_bits,
+    unpack_bits_tensor,
+    verify_manifest,
+)
 
 
 def test_pack_and_unpack_round_trip():
@@ -67,3 +74,11 @@ def test_random_symmetry_keeps_gravity_and_voxel_counts():
         assert torch.equal(out["grids"].sum(dim=(2, 3)), batch["grids"].sum(dim=(2, 3)))
         seen.add(out["occupancy"].numpy().tobytes())
     assert len(seen) > 2
+
+
+def test_tensor_unpacking_matches_numpy():
+    rng = np.random.default_rng(1)
+    grids = rng.random((3, 4, 8, 8, 6)) > 0.5
+    unpacked = unpack_bits_tensor(pack_bits(grids), (4, 8, 8, 6), "cpu")
+    assert unpacked.dtype == torch.float32
+    np.testing.assert_array_equal(unpacked.numpy(), unpack_bits(pack_bits(grids), (4, 8, 8, 6)))

@@ -136,8 +136,7 @@ def train(config: TrainConfig, command: str = "", progress: bool = True) -> dict
             if out_of_time:
                 break
             tick = time.perf_counter()
-            batch = train_set.batch(rng.choice(len(train_set), per_process_batch, replace=False))
-            batch = {key: value.to(device, non_blocking=True) for key, value in batch.items()}
+            batch = train_set.batch(rng.choice(len(train_set), per_process_batch, replace=False), device)
             if config.augment:
                 batch = random_symmetry(batch, augment_generator)
             inputs = select_input_channels(batch["grids"], VARIANTS[config.variant])
