@@ -6,8 +6,9 @@ ends behind it), F4 voxels that are unobserved (occluded, outside the image or w
 Voxels holding points are in F1 or F2 and in neither F3 nor F4.
 
 The grid is axis-aligned with the gravity-aligned world frame, centred horizontally at o's observed
-centre of mass, has side k * delta_o (delta_o: largest distance between o's points) and its bottom
-face lies on the table plane under o, so that the table is the z = 0 plane in voxel coordinates.
+centre of mass, has side k * delta_o (delta_o: largest distance between o's points), or TOP_MARGIN x
+the height of o's seen top above the table when that is more, and its bottom face lies on the table
+plane under o, so that the table is the z = 0 plane in voxel coordinates.
 Voxel (i, j, l) covers [origin + (i, j, l) * voxel_size_m, origin + (i + 1, j + 1, l + 1) * voxel_size_m).
 """
 
@@ -30,6 +31,8 @@ MIN_OBJECT_POINTS = 10
 MIN_DIAMETER_M = 0.01
 SUPPORT_BIN_M = 0.005
 SUPPORT_TOLERANCE_M = 0.01
+SUPPORT_REACH = 2.0  # a support lies at most this many seen diameters below the seen bottom
+TOP_MARGIN = 1.15  # the grid is at least this many times the seen top's height above the support
 MAX_HULL_POINTS = 8192
 EDGE_INTERIOR_PX = 2
 EDGE_WINDOW_PX = 7
@@ -251,7 +254,8 @@ class FrameObservation:
                 f"object {object_id} has {len(own)} valid depth points (< {MIN_OBJECT_POINTS}); cannot build a grid"
             )
         centre = own.mean(0)
-        side = k * max(point_set_diameter(own), MIN_DIAMETER_M)
+        diameter = max(point_set_diameter(own), MIN_DIAMETER_M)
+        side = k * diameter
         voxel = side / resolution
         xy_min = centre[:2] - side / 2
         bottom = float(np.percentile(own[:, 2], 2.0))
@@ -260,18 +264,27 @@ class FrameObservation:
         table = table_height_m
 
         def plausible(height: float | None) -> float | None:
-            # A support so far below that the seen bottom would sit in the grid's upper half (the floor
-            # past a table edge, say) is not this object's: its points would fall out of the grid.
-            return height if height is not None and np.isfinite(height) and bottom - height <= side / 2 else None
+            # A support more than SUPPORT_REACH x the object's seen diameter below its seen bottom (the
+            # floor past a table edge, say) is not this object's.
+            reach = SUPPORT_REACH * diameter
+            return height if height is not None and np.isfinite(height) and bottom - height <= reach else None
 
         if table is None:
+            # The support is looked for within SUPPORT_REACH seen diameters around the object.
             x, y = self.background_x, self.background_y
-            inside = (x >= xy_min[0]) & (x < xy_min[0] + side) & (y >= xy_min[1]) & (y < xy_min[1] + side)
+            low, high = centre[:2] - SUPPORT_REACH * diameter, centre[:2] + SUPPORT_REACH * diameter
+            inside = (x >= low[0]) & (x < high[0]) & (y >= low[1]) & (y < high[1])
             table, source = plausible(support_height(self.background_z[inside], max_support, min_points=10)), "local"
         if table is None:
             table, source = plausible(self.frame_table_height(max_support)), "frame"
         if table is None:
             table, source = float(own[:, 2].min()), "object"
+        # The grid reaches from the support to above the seen top: an object seen only above its hidden
+        # lower part is not cut off at k x its seen diameter.
+        seen_height = float(np.percentile(own[:, 2], 98.0)) - table
+        if TOP_MARGIN * seen_height > side:
+            side = TOP_MARGIN * seen_height
+            voxel, xy_min = side / resolution, centre[:2] - side / 2
         origin = np.array([xy_min[0], xy_min[1], table], dtype=np.float64)
         return GridFrame(origin, float(voxel), int(resolution), float(table), source)
 

@@ -93,7 +93,7 @@ def scene():
 
 
 def test_grid_geometry_follows_the_paper(scene):
-    grid, frame = four_channel_grid(scene["depth"], scene["K"], scene["T"], scene["labels"], 1)
+    grid, frame = four_channel_grid(scene["depth"], scene["K"], scene["T"], scene["labels"], 1, k=4.0)
     assert grid.shape == (4, 32, 32, 32) and grid.dtype == np.float32
     assert set(np.unique(grid)) <= {0.0, 1.0}
     assert abs(frame.table_height_m) < 0.003 and frame.table_source == "local"
@@ -140,16 +140,25 @@ def test_two_table_levels_are_found_per_object():
 
 
 def test_a_support_far_below_the_object_is_not_taken_for_its_table():
-    """A box on a pedestal as small as its base, the floor 0.75 m down: the floor is the only level
-    in view, but the box's points must stay inside its grid, so the grid stands on the box's bottom."""
+    """A box on a pedestal as small as its base, the floor 0.75 m down: the floor is the only wide level
+    in view, but it is no support of the box's: the grid stands on the box's bottom (the pedestal's top)."""
     K = intrinsics()
     T = look_at((0.5, 0.1, 0.45), (0.0, 0.0, 0.04))
     floor = table(z=-0.75, half=3.0)
     pedestal = box((0.05, 0.05, 0.75), (0.0, 0.0, -0.75))
     depth, labels = raycast([floor, pedestal, box((0.05, 0.05, 0.08), (0.0, 0.0, 0.0))], [0, 0, 1], K, T)
     grid, frame = four_channel_grid(depth, K, T, labels, 1)
-    assert frame.table_source == "object" and frame.table_height_m == pytest.approx(0.0, abs=0.01)
+    assert frame.table_source in ("local", "object") and frame.table_height_m == pytest.approx(0.0, abs=0.01)
     assert grid[0].sum() > 0.5 * (labels == 1).sum() ** 0.5, "the box's own voxels are in its grid"
+
+
+def test_a_grid_reaches_from_the_support_over_the_seen_top(scene):
+    """Box 1 is seen only above the tall box in front of it: its grid still stands on the table and
+    holds its seen top, whatever its seen diameter."""
+    _, frame = four_channel_grid(scene["depth"], scene["K"], scene["T"], scene["labels"], 1, k=1.2)
+    observation = FrameObservation(scene["depth"], scene["K"], scene["T"], scene["labels"])
+    top = np.percentile(observation.points_of(1)[:, 2], 98.0)
+    assert abs(frame.table_height_m) < 0.003 and frame.side_m >= top - frame.table_height_m
 
 
 def test_table_is_robust_to_depth_noise(scene):
