@@ -47,7 +47,8 @@ def model_card(checkpoint_path, note: str = "") -> str:
         f"| network | {config['architecture']}, {config['in_channels']} input channels, "
         f"{config['resolution']}^3 grid, {config['base_channels']} base channels, weights stored as "
         f"{extra.get('weights_dtype', 'float32')} |",
-        f"| grid | side {config.get('grid_k', CHECKPOINT_DEFAULT_K):g} x the object's observed diameter |",
+        f"| grid | side {config.get('grid_k', CHECKPOINT_DEFAULT_K):g} x the object's observed diameter "
+        "(more where its seen top needs it) |",
         f"| training data | {extra.get('train_samples', '?')} samples from {extra.get('train_shards', '?')} "
         f"shards of split `{training.get('train_split', '?')}` (training categories) in `{training.get('data', '?')}`"
         f"{_seed_text(extra.get('train_seeds'))} |",
