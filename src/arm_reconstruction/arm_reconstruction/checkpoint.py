@@ -14,6 +14,7 @@ import torch
 
 from arm_core.atomic_io import atomic_write
 
+from .grid import CHECKPOINT_DEFAULT_K
 from .network import ARCHITECTURE, VARIANTS, build_model, model_config, resolve_device
 
 CHECKPOINT_FORMAT = "arm-reconstruction-checkpoint-v1"
@@ -133,4 +134,5 @@ def load_checkpoint(
     except ValueError as error:
         raise CheckpointError(str(error)) from None
     model.eval()
+    model.grid_k = float(config.get("grid_k", CHECKPOINT_DEFAULT_K))  # the grid it was trained on
     return model, dict(config, extra=payload.get("extra", {}))

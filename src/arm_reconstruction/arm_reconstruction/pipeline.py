@@ -197,7 +197,11 @@ class Reconstructor:
         else:
             if getattr(model, "variant", self.settings.variant) != self.settings.variant:
                 raise CheckpointError(f"model variant {model.variant!r} does not fit method {self.settings.method!r}")
-            self.checkpoint_config = {"variant": self.settings.variant, "resolution": getattr(model, "resolution", 0)}
+            self.checkpoint_config = {
+                "variant": self.settings.variant,
+                "resolution": getattr(model, "resolution", 0),
+                "grid_k": getattr(model, "grid_k", CHECKPOINT_DEFAULT_K),
+            }
         self.model = prepare_for_inference(model, self.device)
         self.resolution = int(self.settings.resolution or getattr(model, "resolution", 32))
         if getattr(model, "resolution", self.resolution) != self.resolution:

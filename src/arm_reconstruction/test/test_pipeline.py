@@ -5,7 +5,7 @@ import torch
 from arm_core.camera import look_at
 from arm_core.frames import FrameInputError
 from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
-from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
+from arm_reconstruction.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
 from arm_reconstruction.meshing import to_manifold
@@ -152,6 +152,8 @@ def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path)
     assert reconstructor.resolution == 16 and reconstructor.checkpoint_config["base_channels"] == 8
     assert reconstructor.k == 3.0, "the grid of the checkpoint's training data"
     assert Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt"), k=2.5)).k == 2.5
+    model, _ = load_checkpoint(tmp_path / "arm.pt")
+    assert Reconstructor(ReconstructionSettings(), model=model).k == 3.0, "a loaded model carries its grid"
     objects = reconstructor(*args(frame))
     assert [o.id for o in objects] == sorted(int(i) for i in np.unique(frame.labels) if i > 0)
     assert all(o.grid.resolution == 16 for o in objects)
