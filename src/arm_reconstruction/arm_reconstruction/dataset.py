@@ -21,12 +21,6 @@ class DatasetError(RuntimeError):
     """Missing, corrupt or inconsistent dataset files."""
 
 
-def unpack_bits(bits: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``[n, bytes]`` uint8 from ``np.packbits`` -> bool ``[n, *shape]``."""
-    count = int(np.prod(shape))
-    return np.unpackbits(bits, axis=1, count=count).reshape((len(bits), *shape)).astype(bool)
-
-
 class VoxelDataset:
     """All samples of one split (``<root>/<split>/shard_*.npz``), optionally checked against the manifest.
 
@@ -83,14 +77,14 @@ class VoxelDataset:
         indices = np.asarray(indices, dtype=np.int64)
         d = self.resolution
         return {
-            "grids": unpack_bits_tensor(self._grids[indices], (4, d, d, d), device),
-            "occupancy": unpack_bits_tensor(self._occupancy[indices], (d, d, d), device),
-            "others": unpack_bits_tensor(self._others[indices], (d, d, d), device),
+            "grids": unpack_bits(self._grids[indices], (4, d, d, d), device),
+            "occupancy": unpack_bits(self._occupancy[indices], (d, d, d), device),
+            "others": unpack_bits(self._others[indices], (d, d, d), device),
             "visible_fraction": torch.from_numpy(self.info["visible_fraction"][indices]).to(device),
         }
 
 
-def unpack_bits_tensor(bits: np.ndarray, shape: tuple[int, ...], device) -> torch.Tensor:
+def unpack_bits(bits: np.ndarray, shape: tuple[int, ...], device: str | torch.device = "cpu") -> torch.Tensor:
     """``[n, bytes]`` uint8 from ``np.packbits`` (big-endian bit order) -> float32 ``[n, *shape]`` on device."""
     packed = torch.from_numpy(np.ascontiguousarray(bits)).to(device)
     shifts = torch.arange(7, -1, -1, dtype=torch.uint8, device=packed.device)

@@ -256,8 +256,6 @@ class FrameObservation:
         centre = own.mean(0)
         diameter = max(point_set_diameter(own), MIN_DIAMETER_M)
         side = k * diameter
-        voxel = side / resolution
-        xy_min = centre[:2] - side / 2
         bottom = float(np.percentile(own[:, 2], 2.0))
         max_support = bottom + SUPPORT_TOLERANCE_M
         source = "given"
@@ -282,11 +280,10 @@ class FrameObservation:
         # The grid reaches from the support to above the seen top: an object seen only above its hidden
         # lower part is not cut off at k x its seen diameter.
         seen_height = float(np.percentile(own[:, 2], 98.0)) - table
-        if TOP_MARGIN * seen_height > side:
-            side = TOP_MARGIN * seen_height
-            voxel, xy_min = side / resolution, centre[:2] - side / 2
+        side = max(side, TOP_MARGIN * seen_height)
+        xy_min = centre[:2] - side / 2
         origin = np.array([xy_min[0], xy_min[1], table], dtype=np.float64)
-        return GridFrame(origin, float(voxel), int(resolution), float(table), source)
+        return GridFrame(origin, float(side / resolution), int(resolution), float(table), source)
 
     def grid(self, object_id: int, frame: GridFrame) -> np.ndarray:
         d = frame.resolution

@@ -197,16 +197,12 @@ class Reconstructor:
         else:
             if getattr(model, "variant", self.settings.variant) != self.settings.variant:
                 raise CheckpointError(f"model variant {model.variant!r} does not fit method {self.settings.method!r}")
-            self.checkpoint_config = {
-                "variant": self.settings.variant,
-                "resolution": getattr(model, "resolution", 0),
-                "grid_k": getattr(model, "grid_k", CHECKPOINT_DEFAULT_K),
-            }
+            self.checkpoint_config = {"variant": self.settings.variant, "resolution": getattr(model, "resolution", 0)}
         self.model = prepare_for_inference(model, self.device)
         self.resolution = int(self.settings.resolution or getattr(model, "resolution", 32))
         if getattr(model, "resolution", self.resolution) != self.resolution:
             raise CheckpointError(f"model resolution {model.resolution} differs from requested {self.resolution}")
-        self.k = float(self.settings.k or self.checkpoint_config.get("grid_k", CHECKPOINT_DEFAULT_K))
+        self.k = float(self.settings.k or getattr(model, "grid_k", CHECKPOINT_DEFAULT_K))  # load_checkpoint sets it
         self.decomposer = ConvexDecomposer(self.settings.decomposition)
         self.timer = StageTimer()
 

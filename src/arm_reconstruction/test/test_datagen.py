@@ -17,9 +17,9 @@ def shard():
 def test_shard_holds_consistent_samples(shard):
     n = len(shard["visible_fraction"])
     assert n >= 1 and str(shard["format"]) == datagen.FORMAT and int(shard["resolution"]) == 16
-    grids = unpack_bits(shard["grids_bits"], (4, 16, 16, 16))
-    occupancy = unpack_bits(shard["occupancy_bits"], (16, 16, 16))
-    others = unpack_bits(shard["others_bits"], (16, 16, 16))
+    grids = unpack_bits(shard["grids_bits"], (4, 16, 16, 16)).numpy() > 0.5
+    occupancy = unpack_bits(shard["occupancy_bits"], (16, 16, 16)).numpy() > 0.5
+    others = unpack_bits(shard["others_bits"], (16, 16, 16)).numpy() > 0.5
     assert grids.shape == (n, 4, 16, 16, 16)
     assert (grids.sum(axis=1) >= 1).all(), "every voxel is occupied, observed empty or unobserved"
     assert not (grids[:, 2] & grids[:, 3]).any()
