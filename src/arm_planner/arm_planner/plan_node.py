@@ -22,7 +22,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.duration import Duration
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
@@ -36,6 +35,7 @@ from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.streaming import TrajectoryStream
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
 from arm_ros.conversions import ConversionError
+from arm_ros.executors import QueueAwareMultiThreadedExecutor
 
 
 def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
@@ -52,7 +52,7 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config = PlannerConfig(mppi=mppi)
     config.close_steps = declare(node, "close_steps", 75, "Steps the gripper closes for (paper: 75)", 1, 1000)
     config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
-    config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
+    config.settle_s = declare(node, "settle_s", 1.0, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
     config.rest_creeping_every_step = declare(
         node, "rest_creeping_every_step", False, "Put creeping objects the robot does not touch to rest every step"
@@ -66,7 +66,7 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.realtime_factor = declare(
         node,
         "realtime_factor",
-        0.0,
+        0.9,
         "Planning wall time per planned motion time the path count adapts to (0: always num_paths)",
         0.0,
         100.0,
@@ -361,7 +361,7 @@ class PlanNode(Node):
 
 
 def main(args=None) -> int:
-    return run_node(PlanNode, args, executor_factory=lambda: MultiThreadedExecutor(num_threads=3))
+    return run_node(PlanNode, args, executor_factory=lambda: QueueAwareMultiThreadedExecutor(num_threads=3))
 
 
 if __name__ == "__main__":

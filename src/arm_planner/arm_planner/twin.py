@@ -3,8 +3,10 @@
 Objects arrive as (id, T_world_object, mesh, convex parts) in the object frame. Objects without
 convex parts are decomposed here (arm_reconstruction's plane-split decomposer, the convex hull as
 fallback). Degenerate parts are dropped; an object left without usable geometry is skipped and
-reported. The model is rebuilt only when the set of object geometries changes; new poses of the
-same objects only change the twin's initial state.
+reported. Two reconstructed objects that overlap as built (a hidden side completed into its
+neighbour) do not collide with each other: pressed apart by the solver they never rest, and their
+contacts made a cluttered twin several times slower. The model is rebuilt only when the set of object
+geometries changes; new poses of the same objects only change the twin's initial state.
 """
 
 from __future__ import annotations
@@ -23,12 +25,14 @@ from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSetti
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
-from arm_sim.world import build_world, object_body_name
+from arm_sim.world import object_body_ids, object_body_name, world_spec
 
 MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
 MAX_DECOMPOSITION_PARTS = 8
 MAX_GEOMETRY_VERTICES = 400
+# Objects overlapping deeper than this as built (m) do not collide with each other in the twin.
+OVERLAP_EXCLUDE_M = 0.002
 
 
 def stabilize_servos(model: mujoco.MjModel, max_step_frequency: float = 0.5) -> None:
@@ -51,6 +55,23 @@ def stabilize_servos(model: mujoco.MjModel, max_step_frequency: float = 0.5) -> 
         if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
             d1, d2 = model.jnt_dofadr[model.eq_obj1id[e]], model.jnt_dofadr[model.eq_obj2id[e]]
             model.dof_armature[[d1, d2]] = model.dof_armature[[d1, d2]].max()
+
+
+def overlapping_object_pairs(model: mujoco.MjModel, n_objects: int, depth_m: float) -> list[tuple[int, int]]:
+    """(i, j), i < j: object bodies (arm_sim.world's object_i) that interpenetrate deeper than depth_m
+    at the model's initial poses."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    contacts = data.contact[: data.ncon]
+    if data.ncon == 0 or n_objects < 2:
+        return []
+    index = np.full(model.nbody, -1)
+    index[object_body_ids(model, n_objects)] = np.arange(n_objects)
+    a = index[model.body_rootid[model.geom_bodyid[contacts.geom1]]]
+    b = index[model.body_rootid[model.geom_bodyid[contacts.geom2]]]
+    deep = (a >= 0) & (b >= 0) & (a != b) & (contacts.dist < -depth_m)
+    pairs = np.unique(np.sort(np.stack([a[deep], b[deep]], axis=1), axis=1), axis=0)
+    return [(int(i), int(j)) for i, j in pairs]
 
 
 class TwinError(RuntimeError):
@@ -146,6 +167,7 @@ class Twin:
         table_height_m: float = 0.0,
         timestep_s: float = 0.01,
         robot: RobotSpec | None = None,
+        overlap_exclude_m: float = OVERLAP_EXCLUDE_M,
     ):
         if not np.isfinite(table_height_m):
             raise TwinError("table height is not finite")
@@ -168,7 +190,13 @@ class Twin:
             self.objects.append(obj)
         self.scene = Scene(objects=placed, table_height_m=self.table_height_m)
         try:
-            self.model = build_world(self.scene, robot_arm=True, timestep_s=timestep_s, name="arm_twin")
+            spec = world_spec(self.scene, robot_arm=True, timestep_s=timestep_s, name="arm_twin")
+            self.model = spec.compile()
+            self.overlapping = overlapping_object_pairs(self.model, len(placed), overlap_exclude_m)
+            for i, j in self.overlapping:
+                spec.add_exclude(bodyname1=object_body_name(i), bodyname2=object_body_name(j))
+            if self.overlapping:
+                self.model = spec.compile()
         except Exception as exc:  # mujoco raises ValueError with the compiler's message
             raise TwinError(f"twin failed to compile: {exc}") from exc
         stabilize_servos(self.model)

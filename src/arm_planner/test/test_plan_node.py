@@ -8,7 +8,6 @@ import pytest
 import rclpy
 import trimesh
 from rclpy.action import ActionClient
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -20,6 +19,7 @@ from arm_planner.plan_node import PlanNode
 from arm_ros.common import latched_qos
 from arm_ros.conversions.meshes import mesh_to_msg
 from arm_ros.conversions.poses import matrix_to_pose
+from arm_ros.executors import QueueAwareMultiThreadedExecutor
 from arm_sim import robot
 
 
@@ -29,7 +29,7 @@ def graph():
     overrides = [Parameter("steps", value=5), Parameter("push_steps", value=0), Parameter("settle_s", value=0.0)]
     node = PlanNode(parameter_overrides=overrides)
     client = Node("plan_node_test_client")
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = QueueAwareMultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     executor.add_node(client)
     thread = threading.Thread(target=executor.spin, daemon=True)

@@ -73,3 +73,31 @@ def test_servo_stabilisation_bounds_step_times_frequency():
     before = model.dof_armature.copy()
     stabilize_servos(model)
     np.testing.assert_array_equal(before, model.dof_armature)
+
+
+def _contacts_between(model, data, body_a: str, body_b: str) -> int:
+    a, b = model.body(body_a).id, model.body(body_b).id
+    pairs = {frozenset((model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2])) for c in data.contact[: data.ncon]}
+    return int(frozenset((a, b)) in pairs)
+
+
+def test_objects_overlapping_as_built_pass_through_each_other_and_touching_ones_collide():
+    overlapping = [_box_object(1, (0.0, 0.0, 0.04)), _box_object(2, (0.04, 0.0, 0.04))]  # 1 cm into each other
+    touching = [_box_object(3, (0.0, 0.2, 0.04)), _box_object(4, (0.0499, 0.2, 0.04))]  # 0.1 mm apart
+    twin = Twin(overlapping + touching, 0.0, 0.01)
+    names = {i: twin.body_name(i) for i in (1, 2, 3, 4)}
+    assert twin.overlapping == [(0, 1)]
+    data = mujoco.MjData(twin.model)
+    state = twin.initial_state(robot.HOME_Q, robot.GRIPPER_OPEN_M)
+    mujoco.mj_setState(twin.model, data, state, STATE_SPEC)
+    twin.model.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    mujoco.mj_forward(twin.model, data)
+    assert _contacts_between(twin.model, data, names[1], names[2]) == 0
+    # the touching pair still pushes: box 3 driven into box 4 moves it
+    start = data.xpos[twin.model.body(names[4]).id].copy()
+    qvel = twin.model.body(names[3]).dofadr[0]
+    for _ in range(20):
+        data.qvel[qvel] = 0.3
+        mujoco.mj_step(twin.model, data)
+    assert data.xpos[twin.model.body(names[4]).id][0] - start[0] > 0.01
+    assert Twin(overlapping, 0.0, 0.01, overlap_exclude_m=0.02).overlapping == []

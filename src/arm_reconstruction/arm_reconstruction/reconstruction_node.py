@@ -21,6 +21,7 @@ from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_ros.common import (
     RateLimitedErrors,
     declare,
+    declare_cpu_niceness,
     diagnostics_msg,
     latched_qos,
     run_node,
@@ -72,6 +73,7 @@ class ReconstructionNode(Node):
             choices=["reliable", "best_effort"],
         )
         self.marker_alpha = declare(self, "marker_alpha", 0.8, "Marker opacity", 0.0, 1.0)
+        self.cpu_niceness = declare_cpu_niceness(self)
 
         settings = ReconstructionSettings(
             method=method,

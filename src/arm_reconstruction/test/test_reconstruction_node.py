@@ -121,6 +121,7 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
         context=ros_context,
         parameter_overrides=[
             Parameter("checkpoint_path", value=str(checkpoint)),
+            Parameter("cpu_niceness", value=0),  # in-process: leave the test process's priority alone
             # an untrained network predicts ~0.1 everywhere: a low threshold makes it emit solid grids,
             # which exercises meshing, intersection removal, decomposition and publishing
             Parameter("threshold", value=0.05),
@@ -171,7 +172,11 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
 def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
     with pytest.raises(ValueError, match="checkpoint"):
         ReconstructionNode(
-            context=ros_context, parameter_overrides=[Parameter("checkpoint_path", value=str(tmp_path / "x.pt"))]
+            context=ros_context,
+            parameter_overrides=[
+                Parameter("checkpoint_path", value=str(tmp_path / "x.pt")),
+                Parameter("cpu_niceness", value=0),
+            ],
         )
 
 
@@ -188,7 +193,11 @@ def test_node_reconstructs_frames_of_real_camera_resolutions(checkpoint, ros_con
     msg = frame_msg(frame)
     node = ReconstructionNode(
         context=ros_context,
-        parameter_overrides=[Parameter("checkpoint_path", value=str(checkpoint)), Parameter("threshold", value=0.05)],
+        parameter_overrides=[
+            Parameter("checkpoint_path", value=str(checkpoint)),
+            Parameter("threshold", value=0.05),
+            Parameter("cpu_niceness", value=0),
+        ],
     )
     try:
         node.process(msg)

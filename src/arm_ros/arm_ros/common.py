@@ -66,6 +66,23 @@ def declare(node, name: str, default, description: str, low=None, high=None, cho
     return value
 
 
+PERCEPTION_NICENESS = 10
+
+
+def declare_cpu_niceness(node, default: int = PERCEPTION_NICENESS) -> int:
+    """Declare `cpu_niceness` and lower this process's CPU priority to it (Linux niceness 0-19; a
+    process can lower its own priority, not raise it). The perception nodes default to 10: on a loaded
+    machine the planner and the controller, at 0, get the CPU first and perception runs on what is
+    left. Returns the niceness in effect."""
+    value = declare(
+        node, "cpu_niceness", int(default), "Process CPU niceness (0 = normal priority, 19 = lowest)", 0, 19
+    )
+    current = os.nice(0)
+    if value > current:
+        current = os.nice(value - current)
+    return current
+
+
 def _register_choices(node, name: str, choices: list) -> None:
     registry = getattr(node, "_arm_parameter_choices", None)
     if registry is None:

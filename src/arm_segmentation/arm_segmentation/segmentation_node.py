@@ -15,7 +15,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from arm_interfaces.msg import SegmentedFrame
-from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, run_node, sensor_qos
+from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
 from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
@@ -46,6 +46,7 @@ class SegmentationNode(Node):
         self.use_ground_truth = declare(
             self, "use_ground_truth_masks", False, "Pass the simulator's label image through instead of segmenting"
         )
+        self.cpu_niceness = declare_cpu_niceness(self)
         slop_s = declare(self, "sync_tolerance_s", 0.02, "Largest stamp difference within one frame, seconds", 0.0, 1.0)
         queue = declare(self, "sync_queue_size", 5, "Messages kept per input while matching stamps", 1, 50)
         pose_source = declare(

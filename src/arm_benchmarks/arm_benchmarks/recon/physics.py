@@ -18,7 +18,8 @@ def scene_stability(
     """id -> L2 displacement (m) of each object's centre of mass after duration_s of gravity alone.
 
     objects: arm_planner.twin.TwinObject (object-frame mesh and convex parts, T_world_object). The
-    scene is built as the planner's twin builds it, without the robot; objects the twin would skip
+    scene is built as the planner's twin builds it, without the robot and with every pair of objects
+    colliding (the twin lets objects overlapping as built pass through each other); objects the twin would skip
     (no usable convex part) are absent from the result. A diverging simulation gives inf."""
     placed, ids = [], []
     for obj in objects:
