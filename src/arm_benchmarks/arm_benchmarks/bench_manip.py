@@ -241,6 +241,13 @@ def main(argv=None) -> int:
         action="store_true",
         help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
     )
+    parser.add_argument("--settle-s", type=float, default=PlannerConfig.settle_s, help="twin settling before planning, s")
+    parser.add_argument(
+        "--overlap-exclude-m",
+        type=float,
+        default=PlannerConfig.twin_overlap_exclude_m,
+        help="objects overlapping deeper than this as built do not collide in the twin, m (inf: all collide)",
+    )
     parser.add_argument("--sleep-tolerance", type=float, default=0.0, help="twin sleep tolerance, m/s (0: MuJoCo's)")
     parser.add_argument(
         "--merge-other-objects", action="store_true", help="objects but the target one convex hull each"
@@ -278,6 +285,8 @@ def main(argv=None) -> int:
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
     config.sleep_tolerance = args.sleep_tolerance
+    config.settle_s = args.settle_s
+    config.twin_overlap_exclude_m = args.overlap_exclude_m
     config.close_steps = args.close_steps
     budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
     config.task_steps = {task: steps for task, steps in budgets.items() if steps}
@@ -297,6 +306,8 @@ def main(argv=None) -> int:
         "objects": args.objects or "procedural heldout categories",
         "nthread": args.nthread,
         "domain": args.domain,
+        "settle_s": args.settle_s,
+        "overlap_exclude_m": args.overlap_exclude_m,
     }
     if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step or args.sleep_tolerance:
         settings |= {  # only then: keys of earlier runs stay valid

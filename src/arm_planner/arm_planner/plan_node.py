@@ -52,7 +52,7 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config = PlannerConfig(mppi=mppi)
     config.close_steps = declare(node, "close_steps", 75, "Steps the gripper closes for (paper: 75)", 1, 1000)
     config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
-    config.settle_s = declare(node, "settle_s", 1.0, "Twin settling before planning, s", 0.0, 5.0)
+    config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
     config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
     config.rest_creeping_every_step = declare(
         node, "rest_creeping_every_step", False, "Put creeping objects the robot does not touch to rest every step"
