@@ -241,7 +241,9 @@ def main(argv=None) -> int:
         action="store_true",
         help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
     )
-    parser.add_argument("--settle-s", type=float, default=PlannerConfig.settle_s, help="twin settling before planning, s")
+    parser.add_argument(
+        "--settle-s", type=float, default=PlannerConfig.settle_s, help="twin settling before planning, s"
+    )
     parser.add_argument(
         "--overlap-exclude-m",
         type=float,
