@@ -143,7 +143,7 @@ def measure(
     reconstructor = Reconstructor(settings, model=None if trained else build_model(variant, 32))
     message = segmented_frame_msg(frame, Header())
 
-    stage_samples = {stage: [] for stage in ("decode", *STAGES, "encode", "total")}
+    stage_samples = {stage: [] for stage in ("decode", *STAGES, "encode", "markers", "total")}
     cpu_samples = []
     stage_cpu_samples = {stage: [] for stage in STAGES}
     objects = []
@@ -167,8 +167,9 @@ def measure(
         )
         built = time.perf_counter()
         objects_to_msg(objects, message.header, main_table_height(objects))
+        end = time.perf_counter()  # the node publishes /arm/meshes here, then builds the RViz markers
         markers_msg(objects, message.header)
-        end = time.perf_counter()
+        markers_end = time.perf_counter()
         cpu_s = time.process_time() - cpu_start
         if repeat == 0:
             continue  # warm-up
@@ -177,6 +178,7 @@ def measure(
             stage_samples[stage].append(reconstructor.last_timings_s[stage])
             stage_cpu_samples[stage].append(reconstructor.last_cpu_s[stage])
         stage_samples["encode"].append(end - built)
+        stage_samples["markers"].append(markers_end - end)
         before_oracle = sum(reconstructor.last_timings_s[s] for s in ("grid", "network", "postprocess"))
         stage_samples["total"].append((decoded - start) + before_oracle + (built - oracle_s) + (end - built))
         cpu_samples.append(cpu_s)
@@ -228,7 +230,7 @@ def write_report(result: dict, out_dir="results/perf") -> None:
     summary["reconstruction"] = result
     summary_path.write_text(json.dumps(summary, indent=2))
 
-    stages = {k: v for k, v in result["stages_ms"].items() if k != "total"}
+    stages = {k: v for k, v in result["stages_ms"].items() if k not in ("total", "markers")}
     figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
     left.barh(list(stages), list(stages.values()), color="tab:blue")
     left.set_xlabel("ms per frame")
@@ -264,7 +266,7 @@ def write_report(result: dict, out_dir="results/perf") -> None:
         f"| grid_ms_per_object | {result['grid_ms_per_object']:.1f} | <= 20 |",
         f"| network_ms_per_object | {result['network_ms_per_object']:.1f} | <= 50 |",
         f"| decomposition_ms_per_object | {result['decomposition_ms_per_object']:.1f} | |",
-        f"| frame_to_meshes_s | {result['frame_to_meshes_s']:.3f} | <= 1.5 |",
+        f"| frame_to_meshes_s (to /arm/meshes; RViz markers after) | {result['frame_to_meshes_s']:.3f} | <= 1.0 |",
         "",
         "| stage | wall ms per frame | process CPU ms (all threads) |",
         "|---|---|---|",

@@ -1,7 +1,8 @@
 """Fast approximate convex decomposition for simulation (replaces V-HACD / CoACD on the hot path).
 
-Hierarchical plane splitting on exact solids (manifold3d): start from the mesh's connected pieces
-(pieces under 0.5 % of its volume are dropped);
+Hierarchical plane splitting on exact solids (manifold3d): simplify the mesh within
+simplify_tolerance_m (fewer triangles to cut, same shape to about a millimetre), start from its
+connected pieces (pieces under 0.5 % of its volume are dropped);
 while the pieces' total concavity (hull volume - piece volume) exceeds concavity_tolerance * mesh
 volume and fewer than max_parts pieces exist, split the most concave piece by the axis-aligned plane
 (candidates at fixed fractions of its bounding box) that minimises the summed hull volume of the two
@@ -30,12 +31,15 @@ _AXES = np.eye(3)
 class DecompositionSettings:
     """max_parts: cap on convex parts per object; max_vertices: cap on hull vertices per part;
     concavity_tolerance: allowed summed concavity as a fraction of the mesh volume; method: 'planes'
-    (this module's fast path), 'coacd' (CoACD with tuned settings, seconds per object) or 'hull'."""
+    (this module's fast path), 'coacd' (CoACD with tuned settings, seconds per object) or 'hull';
+    simplify_tolerance_m: how far (metres) the 'planes' path may move the surface when it first
+    simplifies the mesh (0 keeps every triangle)."""
 
     max_parts: int = 8
     max_vertices: int = 64
     concavity_tolerance: float = 0.05
     method: str = "planes"
+    simplify_tolerance_m: float = 0.001
 
     def __post_init__(self):
         if not 1 <= int(self.max_parts) <= 256:
@@ -44,6 +48,8 @@ class DecompositionSettings:
             raise ValueError(f"max_vertices must be in [4, 1024], got {self.max_vertices}")
         if not 0.0 <= float(self.concavity_tolerance) <= 10.0:
             raise ValueError(f"concavity_tolerance must be in [0, 10], got {self.concavity_tolerance}")
+        if not 0.0 <= float(self.simplify_tolerance_m) <= 0.01:
+            raise ValueError(f"simplify_tolerance_m must be in [0, 0.01] m, got {self.simplify_tolerance_m}")
         if self.method not in ("planes", "coacd", "hull"):
             raise ValueError(f"unknown decomposition method '{self.method}' (planes, coacd, hull)")
 
@@ -110,6 +116,8 @@ def _best_split(piece: _Piece, min_volume: float) -> list[_Piece] | None:
 
 
 def _plane_decomposition(solid: manifold3d.Manifold, settings: DecompositionSettings) -> list[np.ndarray]:
+    if settings.simplify_tolerance_m > 0:
+        solid = solid.simplify(float(settings.simplify_tolerance_m))
     total = solid.volume()
     min_volume = MIN_PART_VOLUME_FRACTION * total
     pieces = [_Piece(c) for c in solid.decompose() if c.volume() > min_volume]

@@ -92,7 +92,7 @@ def markers_msg(objects: list[ReconstructedObject], header, alpha: float = 0.8) 
         marker.pose = matrix_to_pose(obj.T_world_object)
         marker.scale.x = marker.scale.y = marker.scale.z = 1.0
         marker.color = object_colour(obj.id, alpha)
-        corners = np.asarray(obj.mesh.vertices)[np.asarray(obj.mesh.faces).reshape(-1)]
-        marker.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in corners]
+        corners = np.asarray(obj.mesh.vertices, dtype=np.float64)[np.asarray(obj.mesh.faces).reshape(-1)]
+        marker.points = [Point(x=x, y=y, z=z) for x, y, z in corners.tolist()]
         markers.append(marker)
     return MarkerArray(markers=markers)

@@ -59,6 +59,9 @@ class ReconstructionNode(Node):
             method=declare(
                 self, "decomposition.method", "planes", "Convex decomposition", choices=["planes", "coacd", "hull"]
             ),
+            simplify_tolerance_m=declare(
+                self, "decomposition.simplify_tolerance_m", 0.001, "Surface error allowed before splitting, m", 0.0, 0.01
+            ),
         )
         visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
         snap = declare(self, "snap_to_depth", True, "Place the seen part of each surface on the observed depth")
