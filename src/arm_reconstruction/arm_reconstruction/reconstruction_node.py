@@ -60,7 +60,7 @@ class ReconstructionNode(Node):
                 self, "decomposition.method", "planes", "Convex decomposition", choices=["planes", "coacd", "hull"]
             ),
             simplify_tolerance_m=declare(
-                self, "decomposition.simplify_tolerance_m", 0.001, "Surface error allowed before splitting, m", 0.0, 0.01
+                self, "decomposition.simplify_tolerance_m", 0.001, "Surface error before splitting, m", 0.0, 0.01
             ),
         )
         visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
