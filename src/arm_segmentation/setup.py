@@ -11,6 +11,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
     ],
+    package_data={package_name: ["checkpoints/*"]},
     install_requires=["setuptools"],
     zip_safe=False,
     maintainer="ARM ROS maintainers",
@@ -19,5 +20,7 @@ setup(
     license="Apache-2.0",
     entry_points={"console_scripts": [
             "segmentation_node = arm_segmentation.segmentation_node:main",
+            "seg_datagen = arm_segmentation.boundary_data:main",
+            "seg_train = arm_segmentation.boundary_train:main",
     ]},
 )

@@ -1,18 +1,21 @@
 """bench_seg: unseen-object instance segmentation quality and latency on simulated cluttered scenes.
 
 N seeded scenes (3-20 held-out objects each, settled by physics, camera pose sampled as in the
-paper's benchmark, depth noise on) are rendered at 640x480 and segmented by the default method and
-by the classic baseline (RANSAC plane + DBSCAN). Both are scored with the UOIS metrics (overlap and
-boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12 objects), and timed per frame.
+paper's benchmark, depth noise on) are rendered at 640x480 and segmented by the default method (with
+the learned boundary cue when its weights are shipped), by the same method on its geometric and
+colour cues alone, and by the classic baseline (RANSAC plane + DBSCAN). All are scored with the
+UOIS metrics (overlap and boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12
+objects), and timed per frame.
 
 Rendered frames and per-scene scores are kept under OUT/cache/, so an interrupted run resumes where
 it stopped. Frames are keyed by the run key of the settings and the simulator's source, scores by the
-run key of the settings and the source of the simulator, the segmentation and this package, so changed
-code renders and scores anew (arm_core.run_key).
+run key of the settings, the boundary network's weights and the source of the simulator, the
+segmentation and this package, so changed code or weights render and score anew (arm_core.run_key).
 Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
 """
 
 import argparse
+import functools
 import json
 import os
 import pathlib
@@ -28,8 +31,9 @@ from arm_core.atomic_io import atomic_write
 from arm_core.run_key import run_key
 from arm_core.stats import mean, median, percentile
 from arm_segmentation.baseline import segment_baseline
+from arm_segmentation.boundary_net import DEFAULT_CHECKPOINT, BoundaryParams
 from arm_segmentation.metrics import segmentation_metrics
-from arm_segmentation.segmentation import segment
+from arm_segmentation.segmentation import SegmentationParams, segment
 from arm_segmentation.visualization import colourise
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
@@ -37,7 +41,12 @@ from arm_sim.views import render_benchmark_view
 
 matplotlib.use("Agg")
 
-METHODS = {"arm_default": segment, "baseline_ransac_dbscan": segment_baseline}
+GEOMETRIC = SegmentationParams(boundary=BoundaryParams(enabled=False))
+METHODS = {
+    "arm_default": segment,
+    "arm_geometric": functools.partial(segment, params=GEOMETRIC),
+    "baseline_ransac_dbscan": segment_baseline,
+}
 METRIC_KEYS = (
     "overlap_precision",
     "overlap_recall",
@@ -100,7 +109,7 @@ def frames_key(args) -> str:
 
 def scores_key(args) -> str:
     """Run key of the per-scene scores: settings, the simulator's, the segmentation's and this package's source."""
-    return run_key(frame_settings(args), packages=SCORE_PACKAGES)
+    return run_key(frame_settings(args), checkpoints=[DEFAULT_CHECKPOINT], packages=SCORE_PACKAGES)
 
 
 def render_scene(index: int, args, pool):
@@ -169,8 +178,8 @@ def aggregate(rows: list[dict]) -> dict:
 
 
 def write_examples(path: pathlib.Path, frames: list, titles: list[str]) -> None:
-    columns = ["RGB", "ground truth", "arm_default", "baseline_ransac_dbscan"]
-    fig, axes = plt.subplots(len(frames), 4, figsize=(16, 3.1 * len(frames)), squeeze=False)
+    columns = ["RGB", "ground truth", "arm_default", "arm_geometric", "baseline_ransac_dbscan"]
+    fig, axes = plt.subplots(len(frames), len(columns), figsize=(4 * len(columns), 3.1 * len(frames)), squeeze=False)
     for row, (frame, title) in enumerate(zip(frames, titles, strict=True)):
         images = [frame["rgb"], colourise(frame["labels"])]
         images += [colourise(METHODS[m](frame["rgb"], frame["depth"], frame["K"], frame["T"])) for m in columns[2:]]

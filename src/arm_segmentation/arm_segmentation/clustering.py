@@ -48,6 +48,7 @@ class ClusterParams:
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
     geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
+    interior_contact_share: float = 0.8  # of all contacts, on pixels the boundary network puts inside
     resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
     thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
     max_instances: int = 255
@@ -130,12 +131,13 @@ def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:
     )
 
 
-def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams, smooth=None):
+def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams, smooth=None, blocked=None):
     """Pixel contacts between different fragments within contact_radius_px of each other.
 
     Returns (pairs (P, 2) int64 with a < b, counts (P, 4)): contacts at a continuous depth, across a
-    depth discontinuity, where a pixel has no depth, and (a subset of the first) continuous
-    contacts between two pixels of the HxW bool `smooth` (zero when it is None).
+    depth discontinuity (or touching a pixel of the HxW bool `blocked`: a learned object outline),
+    where a pixel has no depth, and (a subset of the first) continuous contacts between two pixels
+    of the HxW bool `smooth` (zero when it is None).
     """
     keys, kinds, smooth_kinds = [], [], []
     r = params.contact_radius_px
@@ -149,6 +151,10 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
         za, zb = depth_m[a][touching], depth_m[b][touching]
         unknown = (za <= 0) | (zb <= 0)
         continuous = ~unknown & (np.abs(za - zb) <= depth_jump_limit(np.minimum(za, zb), np.hypot(*shift) + 1, params))
+        if blocked is not None:
+            outline = blocked[a][touching] | blocked[b][touching]
+            continuous &= ~outline
+            unknown &= ~outline
         kinds.append(np.where(unknown, 2, np.where(continuous, 0, 1)))
         if smooth is not None:
             smooth_kinds.append(continuous & smooth[a][touching] & smooth[b][touching])
@@ -245,13 +251,13 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
     return owner
 
 
-def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams) -> np.ndarray:
+def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, blocked=None) -> np.ndarray:
     """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
     both sides above their support) when one of them cannot be an object on its own: it does not
     reach down to the support (a label, the upper part of a print) or it is thin (a stripe, a
     band). Two thick fragments that both rest on the support (boxes standing flush) stay apart,
     whatever the geometry; colour separates them."""
-    pairs, counts = fragment_contacts(labels, depth_m, params, smooth)
+    pairs, counts = fragment_contacts(labels, depth_m, params, smooth, blocked)
     if not len(pairs):
         return labels
     total = counts[:, :3].sum(axis=1)
@@ -270,20 +276,37 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
     return _compact(_union(n, pairs[join])[labels], 0)
 
 
+def merge_across_interior(labels, depth_m, interior, params: ClusterParams) -> np.ndarray:
+    """Join fragments that meet mostly where the boundary network sees no outline (HxW bool
+    `interior`): the bands of a print, a label, the shading of one surface."""
+    pairs, counts = fragment_contacts(labels, depth_m, params, interior)
+    if not len(pairs):
+        return labels
+    total = counts[:, :3].sum(axis=1)
+    join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.interior_contact_share * total)
+    return _compact(_union(int(labels.max()), pairs[join])[labels], 0)
+
+
 def merge_fragments(
-    labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None
-) -> np.ndarray:
+    labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None,
+    blocked=None, interior=None,
+) -> np.ndarray:  # fmt: skip
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
 
     smooth: HxW bool, pixels away from geometric edges, and height_m: HxW height above the support
     (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
-    merge first (merge_geometric)."""
+    merge first (merge_geometric). blocked: HxW bool, learned object outlines; contacts across them
+    count as broken. interior: HxW bool, pixels the network is sure are on no outline; fragments
+    meeting there merge whatever their colour (merge_across_interior)."""
     if n == 0:
         return labels
     if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
-        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params)
+        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params, blocked)
         n = int(labels.max())
-    pairs, counts = fragment_contacts(labels, depth_m, params)
+    if interior is not None:
+        labels = merge_across_interior(labels, depth_m, interior, params)
+        n = int(labels.max())
+    pairs, counts = fragment_contacts(labels, depth_m, params, blocked=blocked)
     if len(pairs) and params.use_colour:
         if params.agglomerative:
             component = _agglomerate(labels, n, pairs, counts, chroma, params)
@@ -296,7 +319,7 @@ def merge_fragments(
             merge = _should_merge(counts, params) & (colour_distance <= limit)
             component = _union(n, pairs[merge])
         labels = _compact(component[labels], 0)
-        pairs, counts = fragment_contacts(labels, depth_m, params)
+        pairs, counts = fragment_contacts(labels, depth_m, params, blocked=blocked)
     n = int(labels.max())
     area = np.bincount(labels.ravel(), weights=area_m2.ravel(), minlength=n + 1)
     small = area < params.min_instance_area_m2
@@ -376,10 +399,15 @@ def cluster_instances(
     table_chroma: np.ndarray | None = None,
     params: ClusterParams = ClusterParams(),
     height_m: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
+    interior: np.ndarray | None = None,
 ) -> np.ndarray:
     """Instance labels (uint16 HxW, 0 = not an object).
 
     height_m: HxW height of each pixel above its support level (m), for merge_geometric.
+    boundary: HxW bool, object outlines from the boundary network (boundary_net): separating edges
+    like depth jumps, and fragments meeting across them do not merge; interior: HxW bool, pixels the
+    network puts confidently on no outline (fragments meeting there merge).
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
     but only count for an instance that has enough area of its own in object_mask.
@@ -388,6 +416,9 @@ def cluster_instances(
     edge, geometric = separating_edges(
         points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
     )
+    if boundary is not None:
+        edge |= boundary & mask
+        geometric |= boundary & mask
     fragments, n = ndimage.label(mask & ~edge)
     if n == 0:
         return np.zeros(mask.shape, dtype=np.uint16)
@@ -413,7 +444,9 @@ def cluster_instances(
     near_edge = cv2.dilate(geometric.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
     smooth = object_mask & ~near_edge
     n = int(fragments.max())
-    labels = merge_fragments(fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2)
+    labels = merge_fragments(
+        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, boundary, interior
+    )
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)
     return _relabel_by_size(labels, params.max_instances)

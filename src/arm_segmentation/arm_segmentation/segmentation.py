@@ -12,6 +12,7 @@ from scipy import ndimage
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
+from arm_segmentation.boundary_net import BoundaryParams, boundary_features, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
@@ -81,6 +82,7 @@ class SegmentationParams:
     fine: FineParams = field(default_factory=FineParams)
     occluders: OccluderParams = field(default_factory=OccluderParams)
     border: BorderParams = field(default_factory=BorderParams)
+    boundary: BoundaryParams = field(default_factory=BoundaryParams)
 
 
 @dataclass
@@ -179,10 +181,16 @@ def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int
     return stage
 
 
-def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams) -> np.ndarray:
+def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, outline=None) -> np.ndarray:
+    """outline: None, or the outline probability on stage's grid (learned_outline)."""
+    boundary = interior = None
+    if outline is not None:
+        boundary = outline > params.boundary.threshold
+        interior = outline < params.boundary.interior_threshold if params.boundary.interior_threshold > 0 else None
     labels = cluster_instances(
         stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
-        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support,
+        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, boundary,
+        interior,
     )  # fmt: skip
     return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
 
@@ -199,6 +207,38 @@ def fine_crop(objects: np.ndarray, stride: int, shape: tuple[int, int], fine: Fi
     if (y1 - y0) * (x1 - x0) > fine.max_pixels:
         return None
     return slice(y0, y1), slice(x0, x1)
+
+
+def _upsampled_crop(image: np.ndarray, crop, stride: int, full_shape) -> np.ndarray:
+    """The full-resolution crop (rows, cols slices) of a working-grid image, upsampled."""
+    y0, x0 = crop[0].start, crop[1].start
+    full = upsample(image[y0 // stride :, x0 // stride :], stride, full_shape)
+    return full[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
+
+
+def working_stage(rgb_full, depth_full, K_full, T, params: SegmentationParams):
+    """(rgb, depth, K, stage) on the working grid (every working_stride-th pixel) of a validated frame."""
+    stride = params.working_stride
+    rgb, depth, K = rgb_full, depth_full, K_full
+    if stride > 1:
+        rgb, depth = rgb_full[::stride, ::stride], depth_full[::stride, ::stride]
+        K = K_full.copy()
+        K[:2] /= stride
+    return rgb, depth, K, _geometry(depth, K, T, params, params.cluster.step_px, None)
+
+
+def stage_features(rgb: np.ndarray, stage: _Stage) -> np.ndarray:
+    """The boundary network's input for a working-grid stage."""
+    return boundary_features(rgb, stage.smoothed, stage.normals_camera, stage.points_world[..., 2] - stage.support)
+
+
+def learned_outline(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.ndarray | None:
+    """HxW float32 working-grid probability that a pixel lies on an object outline, or None without
+    the network (disabled, or no weights)."""
+    predictor = shared_predictor(params)
+    if predictor is None or not np.any(stage.objects):
+        return None
+    return predictor.predict(stage_features(rgb, stage))
 
 
 def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
@@ -224,32 +264,27 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
             raise FrameInputError(f"exclude mask has shape {exclude.shape}, the depth image {depth_full.shape}")
         depth_full = np.where(exclude, np.float32(0.0), depth_full)
     stride = params.working_stride
-    rgb, depth, K = rgb_full, depth_full, K_full
-    if stride > 1:
-        rgb, depth = rgb_full[::stride, ::stride], depth_full[::stride, ::stride]
-        K = K_full.copy()
-        K[:2] /= stride
-    stage = _geometry(depth, K, T, params, params.cluster.step_px, None)
+    rgb, depth, K, stage = working_stage(rgb_full, depth_full, K_full, T, params)
+    outline = learned_outline(rgb, stage, params.boundary)
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
         K_crop = K_full.copy()
         K_crop[0, 2] -= crop[1].start
         K_crop[1, 2] -= crop[0].start
         cluster = params.fine.cluster_params(params.cluster)
-        y0, x0 = crop[0].start, crop[1].start
-        support = upsample(stage.support[y0 // stride :, x0 // stride :], stride, depth_full.shape)
-        support = support[y0 % stride :, x0 % stride :][: crop[0].stop - y0, : crop[1].stop - x0]
+        support = _upsampled_crop(stage.support, crop, stride, depth_full.shape)
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
         radii_px = params.fine.candidate_radius_px, params.fine.missing_candidate_radius_px
         _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, radii_px)
+        fine_outline = None if outline is None else _upsampled_crop(outline, crop, stride, depth_full.shape)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
-        labels[crop] = _cluster(fine, cluster, params)
+        labels[crop] = _cluster(fine, cluster, params, fine_outline)
         table = upsample(stage.table, stride, depth_full.shape)
         table[crop] = fine.table
     else:
         radii_px = params.candidate_radius_px, params.missing_candidate_radius_px
         _colour(stage, rgb, K, T, params, params.table_colour_window_px, radii_px)
-        labels = _cluster(stage, params.cluster, params)
+        labels = _cluster(stage, params.cluster, params, outline)
         table = stage.table
         if stride > 1:
             labels = refine_full_resolution(

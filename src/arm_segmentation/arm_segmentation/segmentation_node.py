@@ -17,6 +17,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
 from arm_ros.conversions.poses import matrix_to_pose
+from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
@@ -89,7 +90,17 @@ class SegmentationNode(Node):
         )
         if len(workspace_min) != 3 or len(workspace_max) != 3:
             raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
+        boundary = BoundaryParams(
+            enabled=declare(self, "boundary_network", True, "Use the learned object-outline cue when its weights load"),
+            threshold=declare(self, "boundary_threshold", 0.5, "Outline probability separating objects", 0.05, 0.95),
+            checkpoint=declare(self, "boundary_checkpoint", "", "Boundary network weights ('' = the shipped ones)"),
+        )
+        predictor = shared_predictor(boundary)  # loaded now: a bad checkpoint path fails at start, not per frame
+        self.get_logger().info(
+            f"boundary network: {predictor.path}" if predictor else "boundary network off: geometric and colour cues"
+        )
         self.params = SegmentationParams(
+            boundary=boundary,
             working_stride=stride,
             workspace_min_m=tuple(float(v) for v in workspace_min),
             workspace_max_m=tuple(float(v) for v in workspace_max),

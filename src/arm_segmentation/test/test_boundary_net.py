@@ -1,0 +1,93 @@
+"""The learned outline cue: targets, features, the network, its loading, its use by the clustering,
+and one real data-generation and training step end to end."""
+
+import numpy as np
+import pytest
+import torch
+from seg_fixtures import Box, look_at, render
+
+import arm_segmentation.segmentation as segmentation
+from arm_segmentation import boundary_net
+from arm_segmentation.boundary_data import make_shard
+from arm_segmentation.boundary_net import (
+    FEATURE_CHANNELS,
+    BoundaryParams,
+    BoundaryPredictor,
+    boundary_features,
+    boundary_targets,
+    build_network,
+    shared_predictor,
+)
+from arm_segmentation.boundary_train import main as train_main
+from arm_segmentation.metrics import segmentation_metrics
+
+
+def test_targets_mark_both_sides_of_every_outline_and_nothing_inside():
+    labels = np.zeros((20, 30), dtype=np.uint16)
+    labels[5:15, 5:15] = 1
+    labels[5:15, 15:25] = 2
+    outline = boundary_targets(labels, radius_px=1)
+    assert outline[10, 14] and outline[10, 15]  # object / object
+    assert outline[10, 4] and outline[10, 5]  # background / object
+    assert not outline[10, 10] and not outline[10, 20] and not outline[0, 0]
+
+
+def test_features_have_fixed_channels_and_no_nan():
+    h, w = 12, 16
+    rgb = np.full((h, w, 3), 128, np.uint8)
+    depth = np.ones((h, w), np.float32)
+    depth[0, 0] = 0.0
+    height = np.full((h, w), np.nan, np.float32)
+    features = boundary_features(rgb, depth, np.zeros((h, w, 3), np.float32), height)
+    assert features.shape == (FEATURE_CHANNELS, h, w) and features.dtype == np.float32
+    assert np.all(np.isfinite(features))
+
+
+def test_network_keeps_the_image_size_for_any_frame_size():
+    model = build_network(4).eval()
+    with torch.inference_mode():
+        assert model(torch.zeros(1, FEATURE_CHANNELS, 50, 70)).shape == (1, 2, 50, 70)
+
+
+def test_missing_weights(tmp_path, monkeypatch):
+    assert shared_predictor(BoundaryParams(enabled=False)) is None
+    with pytest.raises(FileNotFoundError):
+        shared_predictor(BoundaryParams(checkpoint=str(tmp_path / "none.pt")))
+    monkeypatch.setattr(boundary_net, "DEFAULT_CHECKPOINT", tmp_path / "absent.pt")
+    monkeypatch.setattr(boundary_net, "_PREDICTORS", {})
+    assert shared_predictor(BoundaryParams()) is None  # shipped weights absent: geometric cues only
+
+
+def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
+    camera = look_at((-0.5, 0.0, 0.55), (0.0, 0.0, 0.0))
+    boxes = [Box((0.0, -0.04, 0.05), (0.04, 0.04, 0.05)), Box((0.0, 0.04, 0.05), (0.04, 0.04, 0.05))]
+    rgb, depth, truth, K = render(boxes, camera)
+    off = segmentation.SegmentationParams(boundary=BoundaryParams(enabled=False))
+    merged = segmentation.segment(rgb, depth, K, camera, off)
+    assert segmentation_metrics(merged, truth)["n_pred"] == 1  # one continuous surface, one colour
+
+    stride = off.working_stride
+    outline = boundary_targets(truth[::stride, ::stride]).astype(np.float32)
+    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: outline)
+    labels = segmentation.segment(rgb, depth, K, camera)
+    metrics = segmentation_metrics(labels, truth)
+    assert metrics["n_pred"] == 2 and metrics["overlap_f"] > 0.9
+
+
+def test_datagen_and_training_write_weights_the_segmentation_loads(tmp_path):
+    arrays = make_shard(seed=3, split="train", views=1)
+    assert arrays["rgb"].shape == (1, 240, 320, 3) and arrays["labels"].max() > 0
+    for split in ("train", "test"):
+        (tmp_path / "data" / split).mkdir(parents=True)
+        np.savez_compressed(tmp_path / "data" / split / "shard_000003.npz", **arrays)
+    out = tmp_path / "boundary.pt"
+    args = ["--data", str(tmp_path / "data"), "--out", str(out), "--steps", "2", "--batch", "2", "--threads", "1"]
+    assert train_main(args) == 0
+    assert out.is_file() and out.with_suffix(".md").is_file() and out.with_suffix(".state").is_file()
+    predictor = BoundaryPredictor(out)
+    features = boundary_features(
+        arrays["rgb"][0], arrays["depth"][0].astype(np.float32), arrays["normals"][0] / 127.0, arrays["height"][0]
+    )
+    probability = predictor.predict(features)
+    assert probability.shape == (240, 320) and np.all((probability >= 0) & (probability <= 1))
+    assert train_main(args) == 0  # resumes from the saved state: already finished, scores and exports again
