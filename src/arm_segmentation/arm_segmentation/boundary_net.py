@@ -2,9 +2,9 @@
 
 Geometry cannot separate two objects that touch on one continuous surface, and colour cannot tell a
 printed label from a different object. The network looks at colour, depth, normals and height above
-the support together and predicts, per working-grid pixel, the probability that the pixel lies on
-the outline of an object (against another object or the background). The clustering treats pixels
-above `threshold` as separating edges. Without the shipped weights (or with torch missing) the
+the support together and predicts, per working-grid pixel, the probability that the pixel lies where
+two objects meet (an outline between objects). The clustering cuts fragments along its ridges and
+keeps fragments apart whose contact lies on it. Without the shipped weights (or with torch missing) the
 segmentation runs on its geometric cues alone.
 
 Inputs are computed on the working grid (320x240 for a 640x480 frame) by `boundary_features`.
@@ -42,14 +42,26 @@ def boundary_features(rgb: np.ndarray, depth_m: np.ndarray, normals_camera: np.n
 
 
 def boundary_targets(labels: np.ndarray, radius_px: int = 1) -> np.ndarray:
-    """HxW bool: pixels within radius_px of a pixel of another label, where one of the two is an object."""
+    """HxW bool: object pixels with a pixel of another object within radius_px (where two objects
+    meet; an object's outline against the background is geometry's job, and the inside of a thin
+    object stays inside)."""
     labels = np.asarray(labels)
     size = 2 * radius_px + 1
     kernel = np.ones((size, size), np.uint8)
     as_float = labels.astype(np.float32)
     high = cv2.dilate(as_float, kernel)
-    low = cv2.erode(as_float, kernel)
-    return (high != low) & ((labels > 0) | (high > 0))
+    low = cv2.erode(np.where(labels > 0, as_float, np.float32(np.inf)), kernel)
+    return (labels > 0) & ((high != as_float) | (low != as_float))
+
+
+def outline_ridges(probability: np.ndarray, threshold: float) -> np.ndarray:
+    """HxW bool: pixels above threshold that are a local maximum of the outline probability across
+    the band, horizontally or vertically (the band thinned to its ridge, one or two pixels wide)."""
+    p = np.asarray(probability, dtype=np.float32)
+    padded = np.pad(p, 1, mode="edge")
+    ridge_x = (p >= padded[1:-1, :-2]) & (p >= padded[1:-1, 2:])
+    ridge_y = (p >= padded[:-2, 1:-1]) & (p >= padded[2:, 1:-1])
+    return (p > threshold) & (ridge_x | ridge_y)
 
 
 def build_network(width: int = 8):
@@ -97,18 +109,18 @@ def build_network(width: int = 8):
 @dataclass(frozen=True)
 class BoundaryParams:
     """enabled: use the network when its weights load; threshold: outline probability above which a
-    pixel separates instances; interior_threshold: below it a pixel is inside one object, and
-    fragments meeting on such pixels merge whatever their colour (0: off); checkpoint: weights file
-    ('' = the shipped one)."""
+    ridge of it separates fragments (how merging uses it: ClusterParams.outline_*);
+    min_object_probability: instances the network's object channel puts lower on average are dropped
+    (0: off); checkpoint: weights file ('' = the shipped one)."""
 
     enabled: bool = True
     threshold: float = 0.5
-    interior_threshold: float = 0.1
+    min_object_probability: float = 0.0  # instances whose mean object probability is lower are dropped
     checkpoint: str = ""
 
 
 class BoundaryPredictor:
-    """Loads the weights once; predict(features) -> HxW float32 boundary probability."""
+    """Loads the weights once; predict(features) -> outline and object probabilities."""
 
     def __init__(self, checkpoint: str | pathlib.Path = ""):
         import torch
@@ -124,11 +136,13 @@ class BoundaryPredictor:
         self.path = path
 
     def predict(self, features: np.ndarray) -> np.ndarray:
+        """(2, H, W) float32: probability that a pixel lies where two objects meet, and that it is
+        on an object."""
         import torch
 
         with torch.inference_mode():
             logits = self.model(torch.from_numpy(features)[None])
-        return torch.sigmoid(logits[0, 0]).numpy()
+        return torch.sigmoid(logits[0]).numpy()
 
 
 _PREDICTORS: dict[str, BoundaryPredictor | None] = {}

@@ -2,7 +2,7 @@
 
 Random crops of the working-grid frames (mirrored at random, with brightness and contrast jitter)
 are fed to the network; the loss is the class-balanced binary cross-entropy of the outline target
-(pixels within one working-grid pixel of another label, boundary_net.boundary_targets) plus that of
+(object pixels within one working-grid pixel of another object, boundary_net.boundary_targets) plus that of
 the object mask. Every --save-every steps the model, the optimiser and the step go to <out>.state, so
 a stopped run resumes where it stopped; --minutes bounds the wall time of one call. At the end the
 test split is scored (outline precision, recall and F1 at the network's threshold) and <out> (the
@@ -124,6 +124,8 @@ def train(args) -> dict:
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, args.lr, total_steps=args.steps, pct_start=0.05)
     step, history = 0, []
+    if args.init:
+        model.load_state_dict(torch.load(args.init, map_location="cpu", weights_only=False)["model"])
     if state_path.is_file() and not args.restart:
         state = torch.load(state_path, map_location="cpu", weights_only=False)
         model.load_state_dict(state["model"])
@@ -227,6 +229,7 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--restart", action="store_true", help="ignore a saved state")
+    parser.add_argument("--init", default="", help="start from the weights of this state or checkpoint file")
     parser.add_argument("--export-unfinished", action="store_true", help="write the weights even if stopped early")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.batch < 1 or args.minutes <= 0:

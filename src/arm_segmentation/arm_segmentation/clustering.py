@@ -48,7 +48,9 @@ class ClusterParams:
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
     geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
-    interior_contact_share: float = 0.8  # of all contacts, on pixels the boundary network puts inside
+    outline_separate: float = 0.5  # fragments whose contacts' mean learned outline probability is above stay apart
+    outline_inside: float = 0.1  # ... and below it merge whatever their colour
+    outline_edges: bool = True  # ridges of the learned outline cut fragments (else it only steers merges)
     resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
     thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
     max_instances: int = 255
@@ -131,15 +133,16 @@ def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:
     )
 
 
-def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams, smooth=None, blocked=None):
+def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterParams, smooth=None, outline=None):
     """Pixel contacts between different fragments within contact_radius_px of each other.
 
-    Returns (pairs (P, 2) int64 with a < b, counts (P, 4)): contacts at a continuous depth, across a
-    depth discontinuity (or touching a pixel of the HxW bool `blocked`: a learned object outline),
-    where a pixel has no depth, and (a subset of the first) continuous contacts between two pixels
-    of the HxW bool `smooth` (zero when it is None).
+    Returns (pairs (P, 2) int64 with a < b, counts (P, 5) float64): contacts at a continuous depth,
+    across a depth discontinuity, where a pixel has no depth, (a subset of the first) continuous
+    contacts between two pixels of the HxW bool `smooth` (zero when it is None), and the summed
+    outline probability of the contacts (the larger of the two pixels' in the HxW float `outline`
+    from the boundary network; zero when it is None).
     """
-    keys, kinds, smooth_kinds = [], [], []
+    keys, kinds, smooth_kinds, outline_sums = [], [], [], []
     r = params.contact_radius_px
     shifts = [(0, k) for k in range(1, r + 1)] + [(k, 0) for k in range(1, r + 1)]
     shifts += [(k, k) for k in range(1, r)] + [(k, -k) for k in range(1, r)]
@@ -151,25 +154,30 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
         za, zb = depth_m[a][touching], depth_m[b][touching]
         unknown = (za <= 0) | (zb <= 0)
         continuous = ~unknown & (np.abs(za - zb) <= depth_jump_limit(np.minimum(za, zb), np.hypot(*shift) + 1, params))
-        if blocked is not None:
-            outline = blocked[a][touching] | blocked[b][touching]
-            continuous &= ~outline
-            unknown &= ~outline
         kinds.append(np.where(unknown, 2, np.where(continuous, 0, 1)))
         if smooth is not None:
             smooth_kinds.append(continuous & smooth[a][touching] & smooth[b][touching])
+        if outline is not None:
+            outline_sums.append(np.maximum(outline[a][touching], outline[b][touching]))
         lo = np.minimum(la[touching], lb[touching]).astype(np.int64)
         hi = np.maximum(la[touching], lb[touching]).astype(np.int64)
         keys.append(lo * big + hi)
     keys = np.concatenate(keys)
     kinds = np.concatenate(kinds)
     unique, inverse = np.unique(keys, return_inverse=True)
-    counts = np.zeros((len(unique), 4), dtype=np.int64)
+    counts = np.zeros((len(unique), 5), dtype=np.float64)
     for kind in range(3):
         counts[:, kind] = np.bincount(inverse[kinds == kind], minlength=len(unique))
     if smooth is not None:
         counts[:, 3] = np.bincount(inverse[np.concatenate(smooth_kinds)], minlength=len(unique))
+    if outline is not None:
+        counts[:, 4] = np.bincount(inverse, weights=np.concatenate(outline_sums), minlength=len(unique))
     return np.stack([unique // big, unique % big], axis=1), counts
+
+
+def contact_outline(counts: np.ndarray) -> np.ndarray:
+    """(P,) mean outline probability over each pair's contacts (fragment_contacts' counts)."""
+    return counts[:, 4] / np.maximum(counts[:, :3].sum(axis=1), 1.0)
 
 
 def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: int, max_chroma: float) -> np.ndarray:
@@ -211,10 +219,15 @@ def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
     return ((continuous >= params.min_contact_px) & (continuous >= broken)) | across_gap
 
 
-def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64) -> np.ndarray:
+def _agglomerate(
+    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, outline_limits=None
+) -> np.ndarray:
     """Region merging: each round joins the mutually most similar mergeable neighbours, then the
     merged regions' mean colours and contact counts are recomputed, so a chain of small colour
-    steps does not join two objects of different colour. Returns the region of each label 0..n."""
+    steps does not join two objects of different colour. outline_limits (separate, inside): with the
+    outline probability summed in counts, regions whose contacts' mean probability exceeds `separate`
+    never merge, and those below `inside` merge whatever their colour. Returns the region of each
+    label 0..n."""
     flat = labels.ravel()
     frag_size = np.bincount(flat, minlength=n + 1).astype(np.float64)
     frag_sums = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
@@ -228,7 +241,7 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
         keys, inverse = np.unique(np.minimum(a, b)[keep] * big + np.maximum(a, b)[keep], return_inverse=True)
         region_pairs = np.stack([keys // big, keys % big], axis=1)
         region_counts = np.stack(
-            [np.bincount(inverse, weights=counts[keep, k], minlength=len(keys)) for k in range(3)], 1
+            [np.bincount(inverse, weights=counts[keep, k], minlength=len(keys)) for k in range(5)], 1
         )
         size = np.bincount(owner, weights=frag_size, minlength=n + 1)
         means = np.stack([np.bincount(owner, weights=frag_sums[:, k], minlength=n + 1) for k in range(3)], 1)
@@ -238,6 +251,12 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
         small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
         limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
         ok = _should_merge(region_counts, params) & (distance <= limit)
+        if outline_limits is not None:
+            separate, inside = outline_limits
+            mean_outline = contact_outline(region_counts)
+            touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
+            ok = (ok | (touching & (mean_outline < inside))) & (mean_outline <= separate)
+            distance = np.where(mean_outline < inside, 0.0, distance)  # sure insides first
         if not np.any(ok):
             break
         best = np.full(n + 1, np.inf)
@@ -251,17 +270,19 @@ def _agglomerate(labels, n, pairs, counts, chroma, params: ClusterParams, max_ro
     return owner
 
 
-def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, blocked=None) -> np.ndarray:
+def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, outline=None) -> np.ndarray:
     """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
     both sides above their support) when one of them cannot be an object on its own: it does not
     reach down to the support (a label, the upper part of a print) or it is thin (a stripe, a
     band). Two thick fragments that both rest on the support (boxes standing flush) stay apart,
     whatever the geometry; colour separates them."""
-    pairs, counts = fragment_contacts(labels, depth_m, params, smooth, blocked)
+    pairs, counts = fragment_contacts(labels, depth_m, params, smooth, outline)
     if not len(pairs):
         return labels
     total = counts[:, :3].sum(axis=1)
     join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.geometric_contact_share * total)
+    if outline is not None:
+        join &= contact_outline(counts) <= params.outline_separate
     low = ndimage.minimum(np.where(smooth, height_m, np.inf), labels, np.arange(n + 1))
     floating = np.asarray(low) > params.resting_height_m
     inner = np.ones(labels.shape, dtype=np.uint8)
@@ -276,40 +297,27 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
     return _compact(_union(n, pairs[join])[labels], 0)
 
 
-def merge_across_interior(labels, depth_m, interior, params: ClusterParams) -> np.ndarray:
-    """Join fragments that meet mostly where the boundary network sees no outline (HxW bool
-    `interior`): the bands of a print, a label, the shading of one surface."""
-    pairs, counts = fragment_contacts(labels, depth_m, params, interior)
-    if not len(pairs):
-        return labels
-    total = counts[:, :3].sum(axis=1)
-    join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.interior_contact_share * total)
-    return _compact(_union(int(labels.max()), pairs[join])[labels], 0)
-
-
 def merge_fragments(
     labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None,
-    blocked=None, interior=None,
+    outline=None,
 ) -> np.ndarray:  # fmt: skip
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
 
     smooth: HxW bool, pixels away from geometric edges, and height_m: HxW height above the support
     (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
-    merge first (merge_geometric). blocked: HxW bool, learned object outlines; contacts across them
-    count as broken. interior: HxW bool, pixels the network is sure are on no outline; fragments
-    meeting there merge whatever their colour (merge_across_interior)."""
+    merge first (merge_geometric). outline: HxW float, the boundary network's outline probability;
+    fragments whose contacts lie mostly on an outline stay apart, those meeting where it is sure there
+    is none merge whatever their colour."""
     if n == 0:
         return labels
     if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
-        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params, blocked)
+        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params, outline)
         n = int(labels.max())
-    if interior is not None:
-        labels = merge_across_interior(labels, depth_m, interior, params)
-        n = int(labels.max())
-    pairs, counts = fragment_contacts(labels, depth_m, params, blocked=blocked)
+    pairs, counts = fragment_contacts(labels, depth_m, params, outline=outline)
     if len(pairs) and params.use_colour:
         if params.agglomerative:
-            component = _agglomerate(labels, n, pairs, counts, chroma, params)
+            limits = None if outline is None else (params.outline_separate, params.outline_inside)
+            component = _agglomerate(labels, n, pairs, counts, chroma, params, outline_limits=limits)
         else:
             means = _region_means(labels, n, chroma)
             colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
@@ -319,7 +327,7 @@ def merge_fragments(
             merge = _should_merge(counts, params) & (colour_distance <= limit)
             component = _union(n, pairs[merge])
         labels = _compact(component[labels], 0)
-        pairs, counts = fragment_contacts(labels, depth_m, params, blocked=blocked)
+        pairs, counts = fragment_contacts(labels, depth_m, params)
     n = int(labels.max())
     area = np.bincount(labels.ravel(), weights=area_m2.ravel(), minlength=n + 1)
     small = area < params.min_instance_area_m2
@@ -399,15 +407,14 @@ def cluster_instances(
     table_chroma: np.ndarray | None = None,
     params: ClusterParams = ClusterParams(),
     height_m: np.ndarray | None = None,
-    boundary: np.ndarray | None = None,
-    interior: np.ndarray | None = None,
+    outline: np.ndarray | None = None,
+    outline_edges: np.ndarray | None = None,
 ) -> np.ndarray:
     """Instance labels (uint16 HxW, 0 = not an object).
 
     height_m: HxW height of each pixel above its support level (m), for merge_geometric.
-    boundary: HxW bool, object outlines from the boundary network (boundary_net): separating edges
-    like depth jumps, and fragments meeting across them do not merge; interior: HxW bool, pixels the
-    network puts confidently on no outline (fragments meeting there merge).
+    outline: HxW float, the boundary network's outline probability (steers merging, merge_fragments);
+    outline_edges: HxW bool, its ridges, separating edges like depth jumps (when params.outline_edges).
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
     but only count for an instance that has enough area of its own in object_mask.
@@ -416,9 +423,9 @@ def cluster_instances(
     edge, geometric = separating_edges(
         points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
     )
-    if boundary is not None:
-        edge |= boundary & mask
-        geometric |= boundary & mask
+    if outline_edges is not None and params.outline_edges:
+        edge |= outline_edges & mask
+        geometric |= outline_edges & mask
     fragments, n = ndimage.label(mask & ~edge)
     if n == 0:
         return np.zeros(mask.shape, dtype=np.uint16)
@@ -445,7 +452,7 @@ def cluster_instances(
     smooth = object_mask & ~near_edge
     n = int(fragments.max())
     labels = merge_fragments(
-        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, boundary, interior
+        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, outline
     )
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)

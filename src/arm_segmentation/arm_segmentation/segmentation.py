@@ -12,7 +12,7 @@ from scipy import ndimage
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
-from arm_segmentation.boundary_net import BoundaryParams, boundary_features, shared_predictor
+from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
@@ -183,14 +183,11 @@ def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int
 
 def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, outline=None) -> np.ndarray:
     """outline: None, or the outline probability on stage's grid (learned_outline)."""
-    boundary = interior = None
-    if outline is not None:
-        boundary = outline > params.boundary.threshold
-        interior = outline < params.boundary.interior_threshold if params.boundary.interior_threshold > 0 else None
+    ridges = None if outline is None else outline_ridges(outline, params.boundary.threshold)
     labels = cluster_instances(
         stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
-        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, boundary,
-        interior,
+        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, outline,
+        ridges,
     )  # fmt: skip
     return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
 
@@ -233,12 +230,25 @@ def stage_features(rgb: np.ndarray, stage: _Stage) -> np.ndarray:
 
 
 def learned_outline(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.ndarray | None:
-    """HxW float32 working-grid probability that a pixel lies on an object outline, or None without
-    the network (disabled, or no weights)."""
+    """(2, H, W) float32 working-grid probabilities that a pixel lies where two objects meet and that
+    it is on an object, or None without the network (disabled, or no weights)."""
     predictor = shared_predictor(params)
     if predictor is None or not np.any(stage.objects):
         return None
     return predictor.predict(stage_features(rgb, stage))
+
+
+def drop_unlikely_objects(labels: np.ndarray, object_probability: np.ndarray, min_mean: float) -> np.ndarray:
+    """Labels without the instances whose mean object probability (HxW, same grid) is below min_mean."""
+    n = int(labels.max())
+    if n == 0 or min_mean <= 0:
+        return labels
+    flat = labels.ravel()
+    mean = np.bincount(flat, weights=object_probability.ravel(), minlength=n + 1)
+    mean /= np.maximum(np.bincount(flat, minlength=n + 1), 1)
+    drop = mean < min_mean
+    drop[0] = False
+    return _renumber(np.where(drop[labels], 0, labels)) if np.any(drop) else labels
 
 
 def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
@@ -265,7 +275,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         depth_full = np.where(exclude, np.float32(0.0), depth_full)
     stride = params.working_stride
     rgb, depth, K, stage = working_stage(rgb_full, depth_full, K_full, T, params)
-    outline = learned_outline(rgb, stage, params.boundary)
+    learned = learned_outline(rgb, stage, params.boundary)
+    outline = None if learned is None else learned[0]
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
         K_crop = K_full.copy()
@@ -306,6 +317,9 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
+    if learned is not None and params.boundary.min_object_probability > 0:
+        object_probability = upsample(learned[1], stride, depth_full.shape)
+        labels = drop_unlikely_objects(labels, object_probability, params.boundary.min_object_probability)
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 

@@ -22,13 +22,13 @@ from arm_segmentation.boundary_train import main as train_main
 from arm_segmentation.metrics import segmentation_metrics
 
 
-def test_targets_mark_both_sides_of_every_outline_and_nothing_inside():
+def test_targets_mark_where_objects_meet_and_nothing_else():
     labels = np.zeros((20, 30), dtype=np.uint16)
     labels[5:15, 5:15] = 1
     labels[5:15, 15:25] = 2
     outline = boundary_targets(labels, radius_px=1)
-    assert outline[10, 14] and outline[10, 15]  # object / object
-    assert outline[10, 4] and outline[10, 5]  # background / object
+    assert outline[10, 14] and outline[10, 15]  # object / object, both sides
+    assert not outline[10, 4] and not outline[10, 5]  # background / object: geometry's job
     assert not outline[10, 10] and not outline[10, 20] and not outline[0, 0]
 
 
@@ -68,7 +68,8 @@ def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
 
     stride = off.working_stride
     outline = boundary_targets(truth[::stride, ::stride]).astype(np.float32)
-    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: outline)
+    learned = np.stack([outline, (truth[::stride, ::stride] > 0).astype(np.float32)])
+    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: learned)
     labels = segmentation.segment(rgb, depth, K, camera)
     metrics = segmentation_metrics(labels, truth)
     assert metrics["n_pred"] == 2 and metrics["overlap_f"] > 0.9
@@ -89,5 +90,14 @@ def test_datagen_and_training_write_weights_the_segmentation_loads(tmp_path):
         arrays["rgb"][0], arrays["depth"][0].astype(np.float32), arrays["normals"][0] / 127.0, arrays["height"][0]
     )
     probability = predictor.predict(features)
-    assert probability.shape == (240, 320) and np.all((probability >= 0) & (probability <= 1))
+    assert probability.shape == (2, 240, 320) and np.all((probability >= 0) & (probability <= 1))
     assert train_main(args) == 0  # resumes from the saved state: already finished, scores and exports again
+
+
+def test_instances_the_object_channel_rejects_are_dropped():
+    labels = np.zeros((10, 10), dtype=np.uint16)
+    labels[1:4, 1:4], labels[6:9, 6:9] = 1, 2
+    probability = np.where(labels == 2, 0.1, 0.9).astype(np.float32)
+    kept = segmentation.drop_unlikely_objects(labels, probability, 0.3)
+    assert kept.max() == 1 and np.array_equal(kept > 0, labels == 1)
+    assert np.array_equal(segmentation.drop_unlikely_objects(labels, probability, 0.0), labels)
