@@ -169,7 +169,8 @@ def train(args) -> dict:
         result["test"] = evaluate(model, load_split(args.data, "test"), BoundaryParams().threshold)
         config = {"width": args.width, "steps": step, "batch": args.batch,
                   "crop": [args.crop_height, args.crop_width], "lr": args.lr,
-                  "outline_weight": args.outline_weight, "train_frames": int(len(data["labels"]))}  # fmt: skip
+                  "outline_weight": args.outline_weight, "train_frames": int(len(data["labels"])),
+                  "init": pathlib.Path(args.init).name if args.init else "none"}  # fmt: skip
         payload = {"config": config, "model": model.state_dict(), "test": result["test"]}
         atomic_write(out, lambda tmp: torch.save(payload, tmp))
         write_model_card(out, config, result["test"], history)

@@ -48,8 +48,9 @@ class ClusterParams:
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
     geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
-    outline_separate: float = 0.5  # fragments whose contacts' mean learned outline probability is above stay apart
-    outline_inside: float = 0.1  # ... and below it merge whatever their colour
+    outline_separate: float = 0.7  # fragments whose contacts' mean learned outline probability is above stay apart
+    outline_inside: float = 0.1  # ... and below it merge at colour distances up to outline_inside_chroma
+    outline_inside_chroma: float = 0.5
     outline_edges: bool = True  # ridges of the learned outline cut fragments (else it only steers merges)
     resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
     thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
@@ -255,8 +256,9 @@ def _agglomerate(
             separate, inside = outline_limits
             mean_outline = contact_outline(region_counts)
             touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
-            ok = (ok | (touching & (mean_outline < inside))) & (mean_outline <= separate)
-            distance = np.where(mean_outline < inside, 0.0, distance)  # sure insides first
+            sure_inside = touching & (mean_outline < inside) & (distance <= params.outline_inside_chroma)
+            ok = (ok | sure_inside) & (mean_outline <= separate)
+            distance = np.where(sure_inside, 0.0, distance)  # sure insides first
         if not np.any(ok):
             break
         best = np.full(n + 1, np.inf)
