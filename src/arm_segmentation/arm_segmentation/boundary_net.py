@@ -4,8 +4,10 @@ Geometry cannot separate two objects that touch on one continuous surface, and c
 printed label from a different object. The network looks at colour, depth, normals and height above
 the support together and predicts, per working-grid pixel, the probability that the pixel lies where
 two objects meet (an outline between objects). The clustering cuts fragments along its ridges and
-keeps fragments apart whose contact lies on it. Without the shipped weights (or with torch missing) the
-segmentation runs on its geometric cues alone.
+keeps fragments apart whose contact lies on it. Off by default (BoundaryParams.enabled): the shipped
+weights gain about 0.01 overlap F on the realistic benchmark and lose as much on the plain one
+(docs/experiments.md). Without the weights (or with torch missing) the segmentation
+runs on its geometric and colour cues alone.
 
 Inputs are computed on the working grid (320x240 for a 640x480 frame) by `boundary_features`.
 """
@@ -113,7 +115,7 @@ class BoundaryParams:
     min_object_probability: instances the network's object channel puts lower on average are dropped
     (0: off); checkpoint: weights file ('' = the shipped one)."""
 
-    enabled: bool = True
+    enabled: bool = False
     threshold: float = 0.5
     min_object_probability: float = 0.0  # instances whose mean object probability is lower are dropped
     checkpoint: str = ""

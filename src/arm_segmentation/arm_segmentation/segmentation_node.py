@@ -91,11 +91,18 @@ class SegmentationNode(Node):
         if len(workspace_min) != 3 or len(workspace_max) != 3:
             raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
         boundary = BoundaryParams(
-            enabled=declare(self, "boundary_network", True, "Use the learned object-outline cue when its weights load"),
+            enabled=declare(self, "boundary_network", False, "Use the learned object-outline cue (weights shipped)"),
             threshold=declare(self, "boundary_threshold", 0.5, "Outline probability separating objects", 0.05, 0.95),
             checkpoint=declare(self, "boundary_checkpoint", "", "Boundary network weights ('' = the shipped ones)"),
         )
         predictor = shared_predictor(boundary)  # loaded now: a bad checkpoint path fails at start, not per frame
+        threads = declare(self, "torch_threads", 1, "CPU threads of the outline network", 1, 64)
+        if predictor is not None:
+            # One thread: on a loaded machine a niced process's extra OpenMP threads wait on each other
+            # (a 2-thread network took the frame from about 0.12 s to 0.7 s in the running graph).
+            import torch
+
+            torch.set_num_threads(threads)
         self.get_logger().info(
             f"boundary network: {predictor.path}" if predictor else "boundary network off: geometric and colour cues"
         )

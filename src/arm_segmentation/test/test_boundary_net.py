@@ -49,13 +49,13 @@ def test_network_keeps_the_image_size_for_any_frame_size():
         assert model(torch.zeros(1, FEATURE_CHANNELS, 50, 70)).shape == (1, 2, 50, 70)
 
 
-def test_missing_weights(tmp_path, monkeypatch):
-    assert shared_predictor(BoundaryParams(enabled=False)) is None
+def test_off_by_default_and_missing_weights(tmp_path, monkeypatch):
+    assert shared_predictor(BoundaryParams()) is None
     with pytest.raises(FileNotFoundError):
-        shared_predictor(BoundaryParams(checkpoint=str(tmp_path / "none.pt")))
+        shared_predictor(BoundaryParams(enabled=True, checkpoint=str(tmp_path / "none.pt")))
     monkeypatch.setattr(boundary_net, "DEFAULT_CHECKPOINT", tmp_path / "absent.pt")
     monkeypatch.setattr(boundary_net, "_PREDICTORS", {})
-    assert shared_predictor(BoundaryParams()) is None  # shipped weights absent: geometric cues only
+    assert shared_predictor(BoundaryParams(enabled=True)) is None  # shipped weights absent: geometric cues only
 
 
 def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
@@ -70,7 +70,8 @@ def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
     outline = boundary_targets(truth[::stride, ::stride]).astype(np.float32)
     learned = np.stack([outline, (truth[::stride, ::stride] > 0).astype(np.float32)])
     monkeypatch.setattr(segmentation, "learned_outline", lambda *args: learned)
-    labels = segmentation.segment(rgb, depth, K, camera)
+    with_network = segmentation.SegmentationParams(boundary=BoundaryParams(enabled=True))
+    labels = segmentation.segment(rgb, depth, K, camera, with_network)
     metrics = segmentation_metrics(labels, truth)
     assert metrics["n_pred"] == 2 and metrics["overlap_f"] > 0.9
 
@@ -101,3 +102,14 @@ def test_instances_the_object_channel_rejects_are_dropped():
     kept = segmentation.drop_unlikely_objects(labels, probability, 0.3)
     assert kept.max() == 1 and np.array_equal(kept > 0, labels == 1)
     assert np.array_equal(segmentation.drop_unlikely_objects(labels, probability, 0.0), labels)
+
+
+def test_shipped_weights_load_and_separate_differently_coloured_boxes():
+    camera = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
+    boxes = [Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)),
+             Box((0.0, 0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (40, 170, 60))]  # fmt: skip
+    rgb, depth, truth, K = render(boxes, camera)
+    params = segmentation.SegmentationParams(boundary=BoundaryParams(enabled=True))
+    assert shared_predictor(params.boundary) is not None
+    labels = segmentation.segment(rgb, depth, K, camera, params)
+    assert segmentation_metrics(labels, truth)["overlap_f"] > 0.9
