@@ -130,10 +130,14 @@ class BoundaryPredictor:
         path = pathlib.Path(checkpoint) if checkpoint else DEFAULT_CHECKPOINT
         if not path.is_file():
             raise FileNotFoundError(f"boundary network weights not found: {path}")
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        self.config = dict(state["config"])
-        self.model = build_network(int(self.config["width"]))
-        self.model.load_state_dict(state["model"])
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+            self.config = dict(state["config"])
+            self.model = build_network(int(self.config["width"]))
+            self.model.load_state_dict(state["model"])
+        except Exception as error:  # a pickle, zip, key or shape error: all mean "not these weights"
+            reason = (str(error).splitlines() or [""])[0][:160]
+            raise ValueError(f"{path} is not boundary network weights ({type(error).__name__}: {reason})") from error
         self.model.eval()
         self.path = path
 
@@ -152,8 +156,8 @@ _PREDICTORS: dict[str, BoundaryPredictor | None] = {}
 
 def shared_predictor(params: BoundaryParams) -> BoundaryPredictor | None:
     """The predictor for params (loaded on first use, then shared), or None when disabled, or when
-    the shipped weights (or torch) are missing. A checkpoint named in params that does not load
-    raises (FileNotFoundError, or torch's error for a file that is not these weights)."""
+    the shipped weights (or torch) are missing. A checkpoint named in params that is missing raises
+    FileNotFoundError; a weights file that does not load raises ValueError."""
     if not params.enabled:
         return None
     key = params.checkpoint or str(DEFAULT_CHECKPOINT)

@@ -95,7 +95,10 @@ class SegmentationNode(Node):
             threshold=declare(self, "boundary_threshold", 0.5, "Outline probability separating objects", 0.05, 0.95),
             checkpoint=declare(self, "boundary_checkpoint", "", "Boundary network weights ('' = the shipped ones)"),
         )
-        predictor = shared_predictor(boundary)  # loaded now: a bad checkpoint path fails at start, not per frame
+        try:  # loaded now: a bad checkpoint fails at start with one clear line, not per frame
+            predictor = shared_predictor(boundary)
+        except (FileNotFoundError, ValueError) as error:
+            raise ValueError(f"boundary_checkpoint: {error}") from error
         threads = declare(self, "torch_threads", 1, "CPU threads of the outline network", 1, 64)
         if predictor is not None:
             # One thread: on a loaded machine a niced process's extra OpenMP threads wait on each other

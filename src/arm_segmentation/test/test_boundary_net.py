@@ -53,6 +53,9 @@ def test_off_by_default_and_missing_weights(tmp_path, monkeypatch):
     assert shared_predictor(BoundaryParams()) is None
     with pytest.raises(FileNotFoundError):
         shared_predictor(BoundaryParams(enabled=True, checkpoint=str(tmp_path / "none.pt")))
+    (tmp_path / "garbage.pt").write_text("not weights")
+    with pytest.raises(ValueError, match="not boundary network weights"):
+        shared_predictor(BoundaryParams(enabled=True, checkpoint=str(tmp_path / "garbage.pt")))
     monkeypatch.setattr(boundary_net, "DEFAULT_CHECKPOINT", tmp_path / "absent.pt")
     monkeypatch.setattr(boundary_net, "_PREDICTORS", {})
     assert shared_predictor(BoundaryParams(enabled=True)) is None  # shipped weights absent: geometric cues only
