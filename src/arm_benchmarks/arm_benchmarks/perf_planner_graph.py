@@ -150,7 +150,12 @@ def _serve(client: GraphClient, task: str, targets: list[int], processes: dict) 
 
 
 def run_seed(
-    seed: int, n_objects: int, log_dir: pathlib.Path, client: GraphClient, planner_params: dict | None = None
+    seed: int,
+    n_objects: int,
+    log_dir: pathlib.Path,
+    client: GraphClient,
+    planner_params: dict | None = None,
+    reconstruction_params: dict | None = None,
 ) -> dict:
     sim_time = {"use_sim_time": True}
     processes = {
@@ -161,7 +166,9 @@ def run_seed(
     processes["segmentation"] = NodeProcess(
         "segmentation", log_dir / "segmentation.log", params=sim_time | {"image_reliability": "reliable"}
     )
-    processes["reconstruction"] = NodeProcess("reconstruction", log_dir / "reconstruction.log", params=sim_time)
+    processes["reconstruction"] = NodeProcess(
+        "reconstruction", log_dir / "reconstruction.log", params=sim_time | (reconstruction_params or {})
+    )
     processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=sim_time | (planner_params or {}))
     rows = []
     try:
@@ -211,8 +218,10 @@ def _summary(runs: list[dict]) -> dict:
     return figures
 
 
-def measure(seeds=(7, 3), n_objects: int = 10, planner_params: dict | None = None) -> dict:
-    """planner_params: plan_node parameters other than its defaults (for comparisons)."""
+def measure(
+    seeds=(7, 3), n_objects: int = 10, planner_params: dict | None = None, reconstruction_params: dict | None = None
+) -> dict:
+    """planner_params, reconstruction_params: node parameters other than their defaults (for comparisons)."""
     root = pathlib.Path(os.environ.get("ARM_ROOT") or pathlib.Path.cwd())
     rclpy.init()
     node = rclpy.create_node("perf_planner_graph")
@@ -221,7 +230,7 @@ def measure(seeds=(7, 3), n_objects: int = 10, planner_params: dict | None = Non
     try:
         for seed in seeds:
             log_dir = root / "log" / "perf_planner_graph" / f"seed{seed}"
-            runs.append(run_seed(seed, n_objects, log_dir, client, planner_params))
+            runs.append(run_seed(seed, n_objects, log_dir, client, planner_params, reconstruction_params))
             print(json.dumps(runs[-1]), flush=True)
     finally:
         node.destroy_node()
@@ -229,7 +238,8 @@ def measure(seeds=(7, 3), n_objects: int = 10, planner_params: dict | None = Non
     figures = _summary(runs)
     figures["planner_graph_config"] = (
         f"sim_node 640x480 n_objects {n_objects} + segmentation + reconstruction + plan_node "
-        f"({planner_params or 'defaults'}, stream on), seeds {list(seeds)}, {os.cpu_count()} cores; first grasp "
+        f"({planner_params or 'defaults'}, stream on; reconstruction {reconstruction_params or 'defaults'}), "
+        f"seeds {list(seeds)}, {os.cpu_count()} cores; first grasp "
         "with segmentation/reconstruction stopped"
     )
     return figures

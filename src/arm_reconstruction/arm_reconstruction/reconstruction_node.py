@@ -76,6 +76,10 @@ class ReconstructionNode(Node):
             choices=["reliable", "best_effort"],
         )
         self.marker_alpha = declare(self, "marker_alpha", 0.8, "Marker opacity", 0.0, 1.0)
+        max_rate_hz = declare(
+            self, "max_rate_hz", 0.0, "Most frames reconstructed per second (wall clock); 0 = every frame", 0.0, 100.0
+        )
+        self.min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
         self.cpu_niceness = declare_cpu_niceness(self)
 
         settings = ReconstructionSettings(
@@ -105,6 +109,7 @@ class ReconstructionNode(Node):
         self.create_subscription(SegmentedFrame, "arm/segmented_frame", self.on_frame, sensor_qos(reliability, 1))
 
         self.received = self.processed = self.dropped = self.rejected = 0
+        self.last_start_s = -float("inf")  # time.monotonic() when the last frame's reconstruction began
         self._latest: SegmentedFrame | None = None
         self._wake = threading.Condition()
         self._stop = False
@@ -126,14 +131,19 @@ class ReconstructionNode(Node):
             self._latest = msg
             self._wake.notify()
 
+    def _too_early_s(self) -> float:
+        """Seconds until max_rate_hz allows the next frame (<= 0: now)."""
+        return self.last_start_s + self.min_period_s - time.monotonic()
+
     def _work(self) -> None:
         while True:
             with self._wake:
-                while self._latest is None and not self._stop:
-                    self._wake.wait()
+                while not self._stop and (self._latest is None or self._too_early_s() > 0):
+                    self._wake.wait(None if self._latest is None else self._too_early_s())
                 if self._stop:
                     return
-                msg, self._latest = self._latest, None
+                msg, self._latest = self._latest, None  # the newest frame: older ones were dropped
+            self.last_start_s = time.monotonic()
             self.process(msg)
 
     def _publish(self, publisher, msg) -> bool:

@@ -169,6 +169,39 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
         client.destroy_node()
 
 
+def test_max_rate_spaces_reconstructions_and_keeps_the_newest_frame(sim, checkpoint, ros_context):
+    _, frame = sim
+    node = ReconstructionNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter("checkpoint_path", value=str(checkpoint)),
+            Parameter("cpu_niceness", value=0),
+            Parameter("max_rate_hz", value=1.0),
+        ],
+    )
+    client = rclpy.create_node("reconstruction_rate_client", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(client)
+    publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
+    try:
+        assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
+        publisher.publish(frame_msg(frame))
+        assert spin_until(executor, lambda: node.processed == 1, 120)
+        first_start = node.last_start_s
+        for _ in range(3):  # arrive within the 1 s: the last one is reconstructed, the others dropped
+            publisher.publish(frame_msg(frame))
+            executor.spin_once(timeout_sec=0.01)
+        assert spin_until(executor, lambda: node.processed == 2, 120)
+        assert node.last_start_s - first_start >= 0.99
+        assert node.received == 4 and node.dropped == 2
+    finally:
+        node.close()
+        executor.shutdown()
+        node.destroy_node()
+        client.destroy_node()
+
+
 def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
     with pytest.raises(ValueError, match="checkpoint"):
         ReconstructionNode(
