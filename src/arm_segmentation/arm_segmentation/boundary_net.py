@@ -111,13 +111,11 @@ def build_network(width: int = 8):
 @dataclass(frozen=True)
 class BoundaryParams:
     """enabled: use the network when its weights load; threshold: outline probability above which a
-    ridge of it separates fragments (how merging uses it: ClusterParams.outline_*);
-    min_object_probability: instances the network's object channel puts lower on average are dropped
-    (0: off); checkpoint: weights file ('' = the shipped one)."""
+    ridge of it separates fragments (how merging uses it: ClusterParams.outline_*); checkpoint:
+    weights file ('' = the shipped one)."""
 
     enabled: bool = False
     threshold: float = 0.5
-    min_object_probability: float = 0.0  # instances whose mean object probability is lower are dropped
     checkpoint: str = ""
 
 

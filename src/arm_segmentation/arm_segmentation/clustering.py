@@ -51,7 +51,6 @@ class ClusterParams:
     outline_separate: float = 0.7  # fragments whose contacts' mean learned outline probability is above stay apart
     outline_inside: float = 0.1  # ... and below it merge at colour distances up to outline_inside_chroma
     outline_inside_chroma: float = 0.5
-    outline_edges: bool = True  # ridges of the learned outline cut fragments (else it only steers merges)
     resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
     thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
     max_instances: int = 255
@@ -221,14 +220,14 @@ def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
 
 
 def _agglomerate(
-    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, outline_limits=None
+    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, use_outline: bool = False
 ) -> np.ndarray:
     """Region merging: each round joins the mutually most similar mergeable neighbours, then the
     merged regions' mean colours and contact counts are recomputed, so a chain of small colour
-    steps does not join two objects of different colour. outline_limits (separate, inside): with the
-    outline probability summed in counts, regions whose contacts' mean probability exceeds `separate`
-    never merge, and those below `inside` merge whatever their colour. Returns the region of each
-    label 0..n."""
+    steps does not join two objects of different colour. use_outline (counts carry the summed
+    outline probability): regions whose contacts' mean probability exceeds params.outline_separate
+    never merge, and those below params.outline_inside merge up to colour distance
+    params.outline_inside_chroma. Returns the region of each label 0..n."""
     flat = labels.ravel()
     frag_size = np.bincount(flat, minlength=n + 1).astype(np.float64)
     frag_sums = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
@@ -252,12 +251,12 @@ def _agglomerate(
         small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
         limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
         ok = _should_merge(region_counts, params) & (distance <= limit)
-        if outline_limits is not None:
-            separate, inside = outline_limits
+        if use_outline:
             mean_outline = contact_outline(region_counts)
             touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
-            sure_inside = touching & (mean_outline < inside) & (distance <= params.outline_inside_chroma)
-            ok = (ok | sure_inside) & (mean_outline <= separate)
+            sure_inside = touching & (mean_outline < params.outline_inside)
+            sure_inside &= distance <= params.outline_inside_chroma
+            ok = (ok | sure_inside) & (mean_outline <= params.outline_separate)
             distance = np.where(sure_inside, 0.0, distance)  # sure insides first
         if not np.any(ok):
             break
@@ -309,7 +308,7 @@ def merge_fragments(
     (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
     merge first (merge_geometric). outline: HxW float, the boundary network's outline probability;
     fragments whose contacts lie mostly on an outline stay apart, those meeting where it is sure there
-    is none merge whatever their colour."""
+    is none merge across moderate colour differences (_agglomerate)."""
     if n == 0:
         return labels
     if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
@@ -318,8 +317,7 @@ def merge_fragments(
     pairs, counts = fragment_contacts(labels, depth_m, params, outline=outline)
     if len(pairs) and params.use_colour:
         if params.agglomerative:
-            limits = None if outline is None else (params.outline_separate, params.outline_inside)
-            component = _agglomerate(labels, n, pairs, counts, chroma, params, outline_limits=limits)
+            component = _agglomerate(labels, n, pairs, counts, chroma, params, use_outline=outline is not None)
         else:
             means = _region_means(labels, n, chroma)
             colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
@@ -416,7 +414,7 @@ def cluster_instances(
 
     height_m: HxW height of each pixel above its support level (m), for merge_geometric.
     outline: HxW float, the boundary network's outline probability (steers merging, merge_fragments);
-    outline_edges: HxW bool, its ridges, separating edges like depth jumps (when params.outline_edges).
+    outline_edges: HxW bool, its ridges: separating edges like depth jumps.
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
     but only count for an instance that has enough area of its own in object_mask.
@@ -425,7 +423,7 @@ def cluster_instances(
     edge, geometric = separating_edges(
         points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
     )
-    if outline_edges is not None and params.outline_edges:
+    if outline_edges is not None:
         edge |= outline_edges & mask
         geometric |= outline_edges & mask
     fragments, n = ndimage.label(mask & ~edge)

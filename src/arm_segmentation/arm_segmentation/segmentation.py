@@ -230,25 +230,12 @@ def stage_features(rgb: np.ndarray, stage: _Stage) -> np.ndarray:
 
 
 def learned_outline(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.ndarray | None:
-    """(2, H, W) float32 working-grid probabilities that a pixel lies where two objects meet and that
-    it is on an object, or None without the network (disabled, or no weights)."""
+    """HxW float32 working-grid probability that a pixel lies where two objects meet, or None without
+    the network (disabled, or no weights)."""
     predictor = shared_predictor(params)
     if predictor is None or not np.any(stage.objects):
         return None
-    return predictor.predict(stage_features(rgb, stage))
-
-
-def drop_unlikely_objects(labels: np.ndarray, object_probability: np.ndarray, min_mean: float) -> np.ndarray:
-    """Labels without the instances whose mean object probability (HxW, same grid) is below min_mean."""
-    n = int(labels.max())
-    if n == 0 or min_mean <= 0:
-        return labels
-    flat = labels.ravel()
-    mean = np.bincount(flat, weights=object_probability.ravel(), minlength=n + 1)
-    mean /= np.maximum(np.bincount(flat, minlength=n + 1), 1)
-    drop = mean < min_mean
-    drop[0] = False
-    return _renumber(np.where(drop[labels], 0, labels)) if np.any(drop) else labels
+    return predictor.predict(stage_features(rgb, stage))[0]
 
 
 def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
@@ -275,8 +262,7 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         depth_full = np.where(exclude, np.float32(0.0), depth_full)
     stride = params.working_stride
     rgb, depth, K, stage = working_stage(rgb_full, depth_full, K_full, T, params)
-    learned = learned_outline(rgb, stage, params.boundary)
-    outline = None if learned is None else learned[0]
+    outline = learned_outline(rgb, stage, params.boundary)
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
         K_crop = K_full.copy()
@@ -317,9 +303,6 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
-    if learned is not None and params.boundary.min_object_probability > 0:
-        object_probability = upsample(learned[1], stride, depth_full.shape)
-        labels = drop_unlikely_objects(labels, object_probability, params.boundary.min_object_probability)
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
 
 

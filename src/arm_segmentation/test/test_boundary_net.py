@@ -71,8 +71,7 @@ def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
 
     stride = off.working_stride
     outline = boundary_targets(truth[::stride, ::stride]).astype(np.float32)
-    learned = np.stack([outline, (truth[::stride, ::stride] > 0).astype(np.float32)])
-    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: learned)
+    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: outline)
     with_network = segmentation.SegmentationParams(boundary=BoundaryParams(enabled=True))
     labels = segmentation.segment(rgb, depth, K, camera, with_network)
     metrics = segmentation_metrics(labels, truth)
@@ -96,15 +95,6 @@ def test_datagen_and_training_write_weights_the_segmentation_loads(tmp_path):
     probability = predictor.predict(features)
     assert probability.shape == (2, 240, 320) and np.all((probability >= 0) & (probability <= 1))
     assert train_main(args) == 0  # resumes from the saved state: already finished, scores and exports again
-
-
-def test_instances_the_object_channel_rejects_are_dropped():
-    labels = np.zeros((10, 10), dtype=np.uint16)
-    labels[1:4, 1:4], labels[6:9, 6:9] = 1, 2
-    probability = np.where(labels == 2, 0.1, 0.9).astype(np.float32)
-    kept = segmentation.drop_unlikely_objects(labels, probability, 0.3)
-    assert kept.max() == 1 and np.array_equal(kept > 0, labels == 1)
-    assert np.array_equal(segmentation.drop_unlikely_objects(labels, probability, 0.0), labels)
 
 
 def test_shipped_weights_load_and_separate_differently_coloured_boxes():
