@@ -1,3 +1,4 @@
+import contextlib
 import os
 import time
 
@@ -115,26 +116,34 @@ def spin_until(executor, condition, timeout_s=60.0):
     return condition()
 
 
-def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, ros_context):
-    _, frame = sim
-    node = ReconstructionNode(
-        context=ros_context,
-        parameter_overrides=[
-            Parameter("checkpoint_path", value=str(checkpoint)),
-            Parameter("cpu_niceness", value=0),  # in-process: leave the test process's priority alone
-            # an untrained network predicts ~0.1 everywhere: a low threshold makes it emit solid grids,
-            # which exercises meshing, intersection removal, decomposition and publishing
-            Parameter("threshold", value=0.05),
-        ],
-    )
-    client = rclpy.create_node("reconstruction_test_client", context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
+@contextlib.contextmanager
+def node_and_client(context, checkpoint, **params):
+    """A ReconstructionNode on `checkpoint` (in-process: niceness left alone) with `params`, a client
+    node and one executor spinning both; torn down on exit."""
+    overrides = [Parameter("checkpoint_path", value=str(checkpoint)), Parameter("cpu_niceness", value=0)]
+    overrides += [Parameter(name, value=value) for name, value in params.items()]
+    node = ReconstructionNode(context=context, parameter_overrides=overrides)
+    client = rclpy.create_node("reconstruction_test_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     executor.add_node(client)
-    diagnostics = []
-    client.create_subscription(DiagnosticArray, "diagnostics", diagnostics.append, 10)
-    publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
     try:
+        yield node, client, executor
+    finally:
+        node.close()
+        executor.shutdown()
+        node.destroy_node()
+        client.destroy_node()
+
+
+def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, ros_context):
+    _, frame = sim
+    # an untrained network predicts ~0.1 everywhere: a low threshold makes it emit solid grids,
+    # which exercises meshing, intersection removal, decomposition and publishing
+    with node_and_client(ros_context, checkpoint, threshold=0.05) as (node, client, executor):
+        diagnostics = []
+        client.create_subscription(DiagnosticArray, "diagnostics", diagnostics.append, 10)
+        publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
         assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
         bad = frame_msg(frame)
         bad.camera_pose.orientation.w = float("nan")
@@ -162,29 +171,12 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
         values = status_after_the_frame()
         assert {"grid_ms", "network_ms", "decomposition_ms", "frame_to_meshes_ms", "frames_dropped"} <= set(values)
         assert node.received == 2 and node.rejected == 1
-    finally:
-        node.close()
-        executor.shutdown()
-        node.destroy_node()
-        client.destroy_node()
 
 
 def test_max_rate_spaces_reconstructions_and_keeps_the_newest_frame(sim, checkpoint, ros_context):
     _, frame = sim
-    node = ReconstructionNode(
-        context=ros_context,
-        parameter_overrides=[
-            Parameter("checkpoint_path", value=str(checkpoint)),
-            Parameter("cpu_niceness", value=0),
-            Parameter("max_rate_hz", value=1.0),
-        ],
-    )
-    client = rclpy.create_node("reconstruction_rate_client", context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    executor.add_node(client)
-    publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
-    try:
+    with node_and_client(ros_context, checkpoint, max_rate_hz=1.0) as (node, client, executor):
+        publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
         assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
         publisher.publish(frame_msg(frame))
         assert spin_until(executor, lambda: node.processed == 1, 120)
@@ -195,11 +187,6 @@ def test_max_rate_spaces_reconstructions_and_keeps_the_newest_frame(sim, checkpo
         assert spin_until(executor, lambda: node.processed == 2, 120)
         assert node.last_start_s - first_start >= 0.99
         assert node.received == 4 and node.dropped == 2
-    finally:
-        node.close()
-        executor.shutdown()
-        node.destroy_node()
-        client.destroy_node()
 
 
 def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
