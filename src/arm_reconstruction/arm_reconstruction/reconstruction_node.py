@@ -1,9 +1,10 @@
 """reconstruction_node: /arm/segmented_frame -> /arm/meshes (reliable, transient-local) + RViz markers.
 
 Frames are reconstructed by one worker thread that always takes the newest frame; a frame that
-arrives while another waits replaces it (counted as dropped). Malformed frames are logged
-(rate-limited) and nothing is published for them. Diagnostics (per-stage latency, frame counts)
-follow every frame and a 1 s timer.
+arrives while another waits replaces it (counted as dropped). While the planner serves a goal
+(pause_during_goals) frames wait, so planning has the CPU; the newest is reconstructed after.
+Malformed frames are logged (rate-limited) and nothing is published for them. Diagnostics
+(per-stage latency, frame counts) follow every frame and a 1 s timer.
 """
 
 import threading
@@ -29,6 +30,7 @@ from arm_ros.common import (
 )
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg
+from arm_ros.goal_activity import GoalActivity
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
@@ -80,6 +82,9 @@ class ReconstructionNode(Node):
             self, "max_rate_hz", 0.0, "Most frames reconstructed per second (wall clock); 0 = every frame", 0.0, 100.0
         )
         self.min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
+        pause = declare(self, "pause_during_goals", True, "Hold frames back while the planner serves a goal")
+        action = declare(self, "manipulate_action", "arm/manipulate", "The planner's action, for pause_during_goals")
+        pause_limit_s = declare(self, "goal_pause_limit_s", 60.0, "Longest pause for one goal, s", 1.0, 3600.0)
         self.cpu_niceness = declare_cpu_niceness(self)
 
         settings = ReconstructionSettings(
@@ -116,6 +121,7 @@ class ReconstructionNode(Node):
         self._stage_values: dict = {}
         self._status = (DiagnosticStatus.OK, "waiting for frames")
         self.create_timer(1.0, self.publish_diagnostics)
+        self.goals = GoalActivity(self, action, pause_limit_s, self._notify) if pause else None
         self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
         self._worker.start()
         self.get_logger().info(
@@ -131,15 +137,23 @@ class ReconstructionNode(Node):
             self._latest = msg
             self._wake.notify()
 
-    def _too_early_s(self) -> float:
-        """Seconds until max_rate_hz allows the next frame (<= 0: now)."""
-        return self.last_start_s + self.min_period_s - time.monotonic()
+    def _notify(self) -> None:
+        with self._wake:
+            self._wake.notify()
+
+    def _wait_s(self) -> float:
+        """Seconds until the next frame may start (<= 0: now): max_rate_hz's spacing, and a goal being
+        served (checked again at least once a second, so a planner that died is noticed)."""
+        wait_s = self.last_start_s + self.min_period_s - time.monotonic()
+        if self.goals is not None and (goal_s := self.goals.seconds_left()) > 0:
+            wait_s = max(wait_s, min(goal_s, 1.0))
+        return wait_s
 
     def _work(self) -> None:
         while True:
             with self._wake:
-                while not self._stop and (self._latest is None or self._too_early_s() > 0):
-                    self._wake.wait(None if self._latest is None else self._too_early_s())
+                while not self._stop and (self._latest is None or self._wait_s() > 0):
+                    self._wake.wait(None if self._latest is None else self._wait_s())
                 if self._stop:
                     return
                 msg, self._latest = self._latest, None  # the newest frame: older ones were dropped
@@ -211,6 +225,8 @@ class ReconstructionNode(Node):
             "frames_processed": self.processed,
             "frames_dropped": self.dropped,
             "frames_rejected": self.rejected,
+            "goal_pauses": self.goals.pauses if self.goals else 0,
+            "paused_for_goal": bool(self.goals and self.goals.seconds_left() > 0),
         }
         level, message = self._status
         self._publish(self.pub_diag, diagnostics_msg(self, "reconstruction", values, level, message))

@@ -1,5 +1,6 @@
 import contextlib
 import os
+import threading
 import time
 
 import numpy as np
@@ -7,12 +8,14 @@ import pytest
 import rclpy
 import torch
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from arm_core.camera import look_at
+from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_reconstruction.checkpoint import save_checkpoint
 from arm_reconstruction.grid import voxelize_mesh
@@ -226,3 +229,42 @@ def test_node_reconstructs_frames_of_real_camera_resolutions(checkpoint, ros_con
     finally:
         node.close()
         node.destroy_node()
+
+
+def test_frames_wait_while_the_planner_serves_a_goal(sim, checkpoint, ros_context):
+    """A real Manipulate action server holds a goal open: the frame sent meanwhile is reconstructed
+    only once the goal ends, and a second frame sent meanwhile replaces it."""
+    _, frame = sim
+    release = threading.Event()
+
+    def execute(goal_handle):
+        release.wait(60.0)
+        goal_handle.succeed()
+        return Manipulate.Result(success=True)
+
+    with node_and_client(ros_context, checkpoint) as (node, client, executor):
+        server = ActionServer(client, Manipulate, "arm/manipulate", execute)
+        action_client = ActionClient(client, Manipulate, "arm/manipulate")
+        spinner = MultiThreadedExecutor(context=ros_context)  # the server's execute blocks: spin it apart
+        spinner.add_node(client)
+        executor.remove_node(client)
+        threading.Thread(target=spinner.spin, daemon=True).start()
+        try:
+            publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
+            assert action_client.wait_for_server(timeout_sec=10.0)
+            action_client.send_goal_async(Manipulate.Goal(task=0, target_id=1))
+            assert spin_until(executor, lambda: node.goals.seconds_left() > 0, 20)
+            assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
+            for count in (1, 2):
+                publisher.publish(frame_msg(frame))
+                assert spin_until(executor, lambda: node.received == count, 20)  # noqa: B023
+            spin_until(executor, lambda: node.processed > 0, 3.0)
+            assert node.processed == 0 and node.dropped == 1 and node.goals.pauses == 1
+            release.set()
+            assert spin_until(executor, lambda: node.processed == 1, 120)
+            assert node.goals.seconds_left() == 0.0
+        finally:
+            release.set()
+            spinner.shutdown()
+            server.destroy()
+            action_client.destroy()
