@@ -56,7 +56,11 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
     started, started_cpu = time.perf_counter(), time.process_time()
     torch.set_num_threads(max(1, config.threads))
     reconstructors, skipped, checkpoints = load_reconstructors(
-        config.methods, config.checkpoint_dir, config.smoothing_iterations, config.snap_to_depth
+        config.methods,
+        config.checkpoint_dir,
+        config.smoothing_iterations,
+        config.snap_to_depth,
+        config.stable_base_tilt_deg,
     )
     out = pathlib.Path(config.out)
     cache_dir = out / "cache" / config.result_key({c["path"] for c in checkpoints.values()})
@@ -132,6 +136,12 @@ def parse_args(argv=None) -> BenchConfig:
         "--smoothing-iterations", type=int, default=DEFAULT_SMOOTHING_ITERATIONS, help="Taubin smoothing of meshes"
     )
     parser.add_argument(
+        "--stable-base-tilt-deg",
+        type=float,
+        default=defaults.stable_base_tilt_deg,
+        help="widen the base of objects that would topple at this tilt (0: off)",
+    )
+    parser.add_argument(
         "--no-snap", action="store_true", help="leave the seen surface where marching cubes put it (no snapping)"
     )
     parser.add_argument(
@@ -174,6 +184,7 @@ def parse_args(argv=None) -> BenchConfig:
         domain=args.domain,
         smoothing_iterations=args.smoothing_iterations,
         snap_to_depth=not args.no_snap,
+        stable_base_tilt_deg=args.stable_base_tilt_deg,
         view=args.view,
         view_candidates=args.view_candidates,
         qualitative=args.qualitative,

@@ -24,7 +24,7 @@ from arm_core.atomic_io import atomic_write_json
 from arm_core.stats import median
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import occupancy_mesh
-from arm_reconstruction.metrics import chamfer_distance_m
+from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency
 from arm_sim.objects import object_pool
 
 DEFAULT_GRIDS = ("4:32", "3:32", "2.5:32", "2:32", "3:48")
@@ -48,7 +48,8 @@ def reaches_grid_boundary(occupancy: np.ndarray) -> bool:
 
 
 def scene_floor(index: int, config: BenchConfig, pool, grids) -> dict[str, list]:
-    """Per grid 'k:d': rows (chamfer_m, voxel_size_m, cut) of every evaluated object of scene `index`."""
+    """Per grid 'k:d': rows (chamfer_m, voxel_size_m, cut, normal consistency) of every evaluated
+    object of scene `index`."""
     scene, frame = render_scene(index, config, pool)
     ids = evaluated_ids(frame.labels, frame.depth_m, config.min_visible_pixels)
     meshes = {i: scene.objects[i - 1].world_mesh() for i in ids}
@@ -60,25 +61,29 @@ def scene_floor(index: int, config: BenchConfig, pool, grids) -> dict[str, list]
         for grid_frame, object_id in zip(built.frames, built.object_ids, strict=True):
             occupancy = voxelize_mesh(meshes[object_id], grid_frame)
             if not occupancy.any():
-                rows[key].append((None, grid_frame.voxel_size_m, True))
+                rows[key].append((None, grid_frame.voxel_size_m, True, None))
                 continue
-            mesh = occupancy_mesh(occupancy.astype(np.float32), grid_frame)
+            mesh = occupancy_mesh(
+                occupancy.astype(np.float32), grid_frame, smoothing_iterations=config.smoothing_iterations
+            )
             chamfer = chamfer_distance_m(mesh, meshes[object_id], config.chamfer_samples)
-            rows[key].append((chamfer, grid_frame.voxel_size_m, reaches_grid_boundary(occupancy)))
+            normals = normal_consistency(mesh, meshes[object_id], config.chamfer_samples)
+            rows[key].append((chamfer, grid_frame.voxel_size_m, reaches_grid_boundary(occupancy), normals))
     return rows
 
 
 def summarize(rows: dict[str, list]) -> dict[str, dict]:
     summary = {}
     for key, values in rows.items():
-        chamfers = [c for c, _, _ in values if c is not None]
+        chamfers = [c for c, _, _, _ in values if c is not None]
         summary[key] = {
             "objects": len(values),
             "chamfer_mm_mean": 1000 * float(np.mean(chamfers)) if chamfers else None,
             "chamfer_mm_median": 1000 * median(chamfers) if chamfers else None,
-            "voxel_mm_mean": 1000 * float(np.mean([v for _, v, _ in values])),
-            "cut_fraction": float(np.mean([cut for _, _, cut in values])),
-            "empty": sum(c is None for c, _, _ in values),
+            "normal_consistency": float(np.mean([n for *_, n in values if n is not None])) if chamfers else None,
+            "voxel_mm_mean": 1000 * float(np.mean([v for _, v, _, _ in values])),
+            "cut_fraction": float(np.mean([cut for _, _, cut, _ in values])),
+            "empty": sum(c is None for c, *_ in values),
         }
     return summary
 
@@ -89,10 +94,13 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", type=int, default=6)
     parser.add_argument("--domain", default=BenchConfig.domain)
     parser.add_argument("--grids", nargs="+", default=list(DEFAULT_GRIDS), help="K:D pairs")
+    parser.add_argument("--smoothing-iterations", type=int, default=BenchConfig.smoothing_iterations)
     parser.add_argument("--out", default="")
     args = parser.parse_args(argv)
     grids = [parse_grid(text) for text in args.grids]
-    config = BenchConfig(scenes=args.scenes, seed=args.seed, domain=args.domain)
+    config = BenchConfig(
+        scenes=args.scenes, seed=args.seed, domain=args.domain, smoothing_iterations=args.smoothing_iterations
+    )
     pool = object_pool(None, split="heldout", seed=config.seed)
     rows: dict[str, list] = {}
     for index in tqdm(range(args.scenes), desc="grid floor", unit="scene"):
@@ -104,7 +112,8 @@ def main(argv=None) -> int:
     for key, figures in summary["grids"].items():
         print(
             f"k:d {key:>7}  Chamfer {figures['chamfer_mm_mean']:.2f} mm (median {figures['chamfer_mm_median']:.2f})"
-            f"  voxel {figures['voxel_mm_mean']:.1f} mm  cut {figures['cut_fraction']:.3f}  ({figures['objects']})"
+            f"  normals {figures['normal_consistency']:.3f}  voxel {figures['voxel_mm_mean']:.1f} mm"
+            f"  cut {figures['cut_fraction']:.3f}  ({figures['objects']})"
         )
     return 0
 

@@ -10,6 +10,7 @@ extrusion down to the table.
 
 import manifold3d
 import numpy as np
+import scipy.spatial
 import trimesh
 from scipy import ndimage
 from skimage.measure import marching_cubes
@@ -19,6 +20,7 @@ from .grid import GridFrame
 DEFAULT_THRESHOLD = 0.5
 DEFAULT_MIN_COMPONENT_VOXELS = 4
 DEFAULT_SMOOTHING_ITERATIONS = 0
+DEFAULT_STABLE_BASE_TILT_DEG = 20.0
 MIN_CUT_VOLUME_M3 = 1e-9
 
 
@@ -130,6 +132,45 @@ def support_from_below(probabilities: np.ndarray, threshold: float, grid: np.nda
     return np.where(filled & ~occupied, np.float32(1.0), probabilities).astype(np.float32)
 
 
+def widen_unstable_base(probabilities: np.ndarray, threshold: float, grid: np.ndarray, tilt_deg: float) -> np.ndarray:
+    """The stability prior at test time: an object standing on the table (grid z = 0) whose centre of
+    mass (uniform density over the occupied voxels) lies less than h * tan(tilt_deg) inside its
+    footprint (h: the centre's height) would topple at that tilt. Its bottom layer then gains the
+    unobserved voxels (F4) under its own shadow within that distance (plus one voxel) of the centre's
+    foot: a base, where the view allows one. Unchanged for objects on other objects or stable ones."""
+    occupied = probabilities > threshold
+    footprint = occupied[:, :, 0]
+    if tilt_deg <= 0 or not footprint.any():
+        return probabilities
+    ijk = np.argwhere(occupied)
+    com = ijk.mean(axis=0)
+    reach = (com[2] + 0.5) * np.tan(np.radians(tilt_deg))  # voxels; the table plane is z = -0.5
+    d = occupied.shape[0]
+    ii, jj = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+    near_foot = np.hypot(ii - com[0], jj - com[1]) <= reach + 1.0
+    if _inside_margin(footprint, com[:2]) >= reach:
+        return probabilities
+    base = near_foot & occupied.any(axis=2) & (np.asarray(grid)[3][:, :, 0] > 0) & ~footprint
+    if not base.any():
+        return probabilities
+    out = np.array(probabilities, dtype=np.float32, copy=True)
+    out[:, :, 0] = np.where(base, np.float32(1.0), out[:, :, 0])
+    return out
+
+
+def _inside_margin(footprint: np.ndarray, point_ij: np.ndarray) -> float:
+    """Signed distance (voxels) from point_ij to the border of the footprint's convex hull (voxel
+    squares), positive inside."""
+    corners = np.argwhere(footprint)[:, None, :] + np.array([[-0.5, -0.5], [-0.5, 0.5], [0.5, -0.5], [0.5, 0.5]])
+    corners = corners.reshape(-1, 2)
+    try:
+        hull = scipy.spatial.ConvexHull(corners)
+    except scipy.spatial.QhullError:
+        return -1.0
+    # hull.equations: normal . x + offset <= 0 inside; the distance to the nearest facet
+    return float(-np.max(hull.equations[:, :2] @ point_ij + hull.equations[:, 2]))
+
+
 def empty_mesh() -> trimesh.Trimesh:
     return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
 
@@ -141,6 +182,7 @@ def occupancy_mesh(
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS,
     grid: np.ndarray | None = None,
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
+    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG,
 ) -> trimesh.Trimesh:
     """World-frame watertight mesh of the voxels whose probability exceeds threshold (empty mesh when
     none do). smoothing_iterations > 0: Taubin smoothing of the surface (volume-preserving: it takes
@@ -149,7 +191,8 @@ def occupancy_mesh(
     surface below the bottom layer's centres is flattened onto the table plane (grid z = 0), so that
     a shape standing on the table rests on it with a flat base. grid [4, d, d, d]: the object's
     four-channel grid; components apart from its observed voxels (F1) are dropped, then what is
-    left is supported from below if it floats (support_from_below)."""
+    left is supported from below if it floats (support_from_below) and given a base if it would
+    topple at stable_base_tilt_deg (widen_unstable_base; 0: never)."""
     if not 0.0 < threshold < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold}")
     probabilities = np.nan_to_num(np.asarray(probabilities, dtype=np.float32), nan=0.0)
@@ -161,6 +204,7 @@ def occupancy_mesh(
     probabilities = drop_small_components(probabilities, threshold, min_component_voxels)
     if grid is not None:
         probabilities = support_from_below(probabilities, threshold, grid)
+        probabilities = widen_unstable_base(probabilities, threshold, grid, stable_base_tilt_deg)
     if not (probabilities > threshold).any():
         return empty_mesh()
     padded = np.pad(probabilities, 1, constant_values=0.0)

@@ -23,6 +23,7 @@ from .grid import CHECKPOINT_DEFAULT_K, FrameGrids, GridFrame, GridInputError, f
 from .meshing import (
     DEFAULT_MIN_COMPONENT_VOXELS,
     DEFAULT_SMOOTHING_ITERATIONS,
+    DEFAULT_STABLE_BASE_TILT_DEG,
     DEFAULT_THRESHOLD,
     add_missed_observed_voxels,
     empty_mesh,
@@ -114,6 +115,7 @@ class ReconstructionSettings:
     threshold: float = DEFAULT_THRESHOLD
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
+    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
     snap_to_depth: bool = True
     snap: SnapSettings = field(default_factory=SnapSettings)
     complete_revolutions: bool = True
@@ -269,6 +271,7 @@ class Reconstructor:
                     1 if alone else s.min_component_voxels,
                     grid=g,
                     smoothing_iterations=s.smoothing_iterations,
+                    stable_base_tilt_deg=s.stable_base_tilt_deg,
                 )
                 for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
             ]

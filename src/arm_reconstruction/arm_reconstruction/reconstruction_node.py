@@ -65,6 +65,9 @@ class ReconstructionNode(Node):
                 self, "decomposition.simplify_tolerance_m", 0.001, "Surface error before splitting, m", 0.0, 0.01
             ),
         )
+        stable_base = declare(
+            self, "stable_base_tilt_deg", 20.0, "Base for objects toppling at this tilt, deg; 0 = off", 0.0, 45.0
+        )
         visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
         snap = declare(self, "snap_to_depth", True, "Place the seen part of each surface on the observed depth")
         revolutions = declare(
@@ -100,6 +103,7 @@ class ReconstructionNode(Node):
             estimate_visibility=visibility,
             snap_to_depth=snap,
             complete_revolutions=revolutions,
+            stable_base_tilt_deg=stable_base,
             table_height_m=table_height if fixed_table else None,
         )
         try:

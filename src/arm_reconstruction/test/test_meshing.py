@@ -15,6 +15,7 @@ from arm_reconstruction.meshing import (
     rests_on_support,
     support_from_below,
     to_manifold,
+    widen_unstable_base,
 )
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
@@ -180,6 +181,27 @@ def test_a_floating_object_is_extended_down_through_unobserved_space_only():
     assert np.array_equal(support_from_below(probabilities, 0.5, on_other), probabilities)
     mesh = occupancy_mesh(probabilities, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid)
     assert mesh.bounds[0, 2] < 0.001, "the mesh stands on the table"
+
+
+def test_a_top_heavy_object_on_a_point_gains_a_base_where_the_view_allows():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[7, 7, 0:8] = 0.9  # one-voxel stem
+    probabilities[4:11, 4:11, 8:11] = 0.9  # a heavy shade on top
+    grid = np.zeros((4, 16, 16, 16), np.float32)
+    grid[3] = 1.0  # nothing seen around it
+    grid[3, 4:11, 10, 0] = 0.0
+    grid[2, 4:11, 10, 0] = 1.0  # one row of the table under the shade seen empty
+    widened = widen_unstable_base(probabilities, 0.5, grid, tilt_deg=10.0)
+    base = widened[:, :, 0] > 0.5
+    assert base[7, 7] and base.sum() > 1 and not base[:, 10].any(), "a base, not where the table was seen"
+    assert not base[:4].any() and not base[11:].any(), "inside the object's own shadow"
+    assert np.array_equal(widened[:, :, 1:], probabilities[:, :, 1:])
+    assert np.array_equal(widen_unstable_base(probabilities, 0.5, grid, tilt_deg=0.0), probabilities), "off"
+    box = np.zeros_like(probabilities)
+    box[4:11, 4:11, 0:8] = 0.9  # a box stands on its whole footprint: unchanged
+    assert np.array_equal(widen_unstable_base(box, 0.5, grid, tilt_deg=10.0), box)
+    lifted = np.roll(probabilities, 2, axis=2)  # on something else, not the table: unchanged
+    assert np.array_equal(widen_unstable_base(lifted, 0.5, grid, tilt_deg=10.0), lifted)
 
 
 def test_intersections_are_cut_from_the_larger_mesh():

@@ -7,7 +7,7 @@ import pathlib
 
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_core.run_key import run_key
-from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS
+from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS, DEFAULT_STABLE_BASE_TILT_DEG
 from arm_reconstruction.metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION
 from arm_sim.appearance import DEFAULT_DOMAIN
 
@@ -54,6 +54,7 @@ class BenchConfig:
     domain: str = DEFAULT_DOMAIN
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     snap_to_depth: bool = True
+    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4

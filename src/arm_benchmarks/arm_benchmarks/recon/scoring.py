@@ -27,6 +27,7 @@ from arm_benchmarks.recon.scenes import (
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_reconstruction.grid import DEFAULT_K, DEFAULT_RESOLUTION
+from arm_reconstruction.meshing import DEFAULT_STABLE_BASE_TILT_DEG
 from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency, volumetric_iou
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor, StageTimer, resolve_checkpoint_path
@@ -56,7 +57,11 @@ def file_digest(path) -> str:
 
 
 def load_reconstructors(
-    methods, checkpoint_dir: str = "", smoothing_iterations: int = 0, snap_to_depth: bool = True
+    methods,
+    checkpoint_dir: str = "",
+    smoothing_iterations: int = 0,
+    snap_to_depth: bool = True,
+    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG,
 ) -> tuple[dict, dict, dict]:
     """-> (name -> Reconstructor, name -> reason skipped, name -> checkpoint path and sha256). Methods
     sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods."""
@@ -65,7 +70,10 @@ def load_reconstructors(
         if name not in METHODS:
             continue
         settings = ReconstructionSettings(
-            method=name, smoothing_iterations=smoothing_iterations, snap_to_depth=snap_to_depth
+            method=name,
+            smoothing_iterations=smoothing_iterations,
+            snap_to_depth=snap_to_depth,
+            stable_base_tilt_deg=stable_base_tilt_deg,
         )
         if checkpoint_dir:
             path = pathlib.Path(checkpoint_dir) / f"{settings.variant}.pt"
@@ -89,7 +97,11 @@ def load_reconstructors(
         resolution = reconstructors["arm"].resolution if "arm" in reconstructors else max(resolutions, default=0)
         k = reconstructors["arm"].k if "arm" in reconstructors else DEFAULT_K
         only_settings = ReconstructionSettings(
-            method="baseline", resolution=resolution or DEFAULT_RESOLUTION, k=k, snap_to_depth=snap_to_depth
+            method="baseline",
+            resolution=resolution or DEFAULT_RESOLUTION,
+            k=k,
+            snap_to_depth=snap_to_depth,
+            stable_base_tilt_deg=stable_base_tilt_deg,
         )
         only = VisibleOnly(only_settings)
         reconstructors = {VISIBLE_ONLY: only, **reconstructors}
