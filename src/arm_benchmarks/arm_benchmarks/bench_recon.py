@@ -61,6 +61,7 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
         config.smoothing_iterations,
         config.snap_to_depth,
         config.stable_base_tilt_deg,
+        config.join_parts,
     )
     out = pathlib.Path(config.out)
     cache_dir = out / "cache" / config.result_key({c["path"] for c in checkpoints.values()})
@@ -141,6 +142,7 @@ def parse_args(argv=None) -> BenchConfig:
         default=defaults.stable_base_tilt_deg,
         help="widen the base of objects that would topple at this tilt (0: off)",
     )
+    parser.add_argument("--no-join", action="store_true", help="leave an object's separate parts apart (no joining)")
     parser.add_argument(
         "--no-snap", action="store_true", help="leave the seen surface where marching cubes put it (no snapping)"
     )
@@ -185,6 +187,7 @@ def parse_args(argv=None) -> BenchConfig:
         smoothing_iterations=args.smoothing_iterations,
         snap_to_depth=not args.no_snap,
         stable_base_tilt_deg=args.stable_base_tilt_deg,
+        join_parts=not args.no_join,
         view=args.view,
         view_candidates=args.view_candidates,
         qualitative=args.qualitative,

@@ -132,6 +132,51 @@ def support_from_below(probabilities: np.ndarray, threshold: float, grid: np.nda
     return np.where(filled & ~occupied, np.float32(1.0), probabilities).astype(np.float32)
 
 
+def _axis_path(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Voxels (K, 3) of a 6-connected path from start to end (both included) along the straight line:
+    the line's voxels, with a diagonal step between two of them split into one step per axis."""
+    start, end = np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64)
+    count = int(np.abs(end - start).max()) + 1
+    line = np.rint(np.linspace(start, end, count)).astype(np.int64)
+    previous, following = line[:-1], line[1:]
+    step_x = np.column_stack([following[:, 0], previous[:, 1:]])
+    step_xy = np.column_stack([following[:, :2], previous[:, 2]])
+    path = np.concatenate([np.stack([previous, step_x, step_xy], axis=1).reshape(-1, 3), line[-1:]])
+    keep = np.concatenate([[True], (np.diff(path, axis=0) != 0).any(axis=1)])
+    return path[keep]
+
+
+def connect_parts(probabilities: np.ndarray, threshold: float, grid: np.ndarray) -> np.ndarray:
+    """The connectivity prior at test time: a rigid object is one piece. Each occupied part apart from
+    the largest (6-connected) is joined to it by a one-voxel path between their nearest voxels,
+    largest part first, unless the path crosses space seen empty (F3) or another object (F2); a part
+    that cannot be joined stays as it is (dropping the small ones cost Chamfer: they are seen surface)."""
+    occupied = probabilities > threshold
+    labels, count = ndimage.label(occupied)
+    if count < 2:
+        return probabilities
+    grid = np.asarray(grid)
+    blocked = ((grid[1] > 0) | (grid[2] > 0)) & ~occupied
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    main = labels == int(np.argmax(sizes))
+    added = np.zeros_like(occupied)
+    for part_label in np.argsort(-sizes)[1:count]:
+        part = labels == part_label
+        distance, nearest = ndimage.distance_transform_edt(~main, return_indices=True)
+        voxels = np.argwhere(part)
+        start = voxels[int(np.argmin(distance[part]))]
+        path = _axis_path(start, nearest[:, start[0], start[1], start[2]])
+        if blocked[tuple(path.T)].any():
+            continue
+        added[tuple(path.T)] = True
+        main |= part
+        main[tuple(path.T)] = True
+    if not added.any():
+        return probabilities
+    return np.where(added & ~occupied, np.float32(1.0), probabilities).astype(np.float32)
+
+
 def widen_unstable_base(probabilities: np.ndarray, threshold: float, grid: np.ndarray, tilt_deg: float) -> np.ndarray:
     """The stability prior at test time: an object standing on the table (grid z = 0) whose centre of
     mass (uniform density over the occupied voxels) lies less than h * tan(tilt_deg) inside its
@@ -183,6 +228,7 @@ def occupancy_mesh(
     grid: np.ndarray | None = None,
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG,
+    join_parts: bool = True,
 ) -> trimesh.Trimesh:
     """World-frame watertight mesh of the voxels whose probability exceeds threshold (empty mesh when
     none do). smoothing_iterations > 0: Taubin smoothing of the surface (volume-preserving: it takes
@@ -191,8 +237,9 @@ def occupancy_mesh(
     surface below the bottom layer's centres is flattened onto the table plane (grid z = 0), so that
     a shape standing on the table rests on it with a flat base. grid [4, d, d, d]: the object's
     four-channel grid; components apart from its observed voxels (F1) are dropped, then what is
-    left is supported from below if it floats (support_from_below) and given a base if it would
-    topple at stable_base_tilt_deg (widen_unstable_base; 0: never)."""
+    left is supported from below if it floats (support_from_below), its parts joined (join_parts:
+    connect_parts) and given a base if it would topple at stable_base_tilt_deg (widen_unstable_base;
+    0: never)."""
     if not 0.0 < threshold < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold}")
     probabilities = np.nan_to_num(np.asarray(probabilities, dtype=np.float32), nan=0.0)
@@ -204,6 +251,8 @@ def occupancy_mesh(
     probabilities = drop_small_components(probabilities, threshold, min_component_voxels)
     if grid is not None:
         probabilities = support_from_below(probabilities, threshold, grid)
+        if join_parts:
+            probabilities = connect_parts(probabilities, threshold, grid)
         probabilities = widen_unstable_base(probabilities, threshold, grid, stable_base_tilt_deg)
     if not (probabilities > threshold).any():
         return empty_mesh()

@@ -116,6 +116,7 @@ class ReconstructionSettings:
     min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
+    join_parts: bool = True
     snap_to_depth: bool = True
     snap: SnapSettings = field(default_factory=SnapSettings)
     complete_revolutions: bool = True
@@ -272,6 +273,7 @@ class Reconstructor:
                     grid=g,
                     smoothing_iterations=s.smoothing_iterations,
                     stable_base_tilt_deg=s.stable_base_tilt_deg,
+                    join_parts=s.join_parts,
                 )
                 for p, frame, g, alone in zip(probabilities, grids.frames, grids.grids, from_observed, strict=True)
             ]

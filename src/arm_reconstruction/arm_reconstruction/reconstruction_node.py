@@ -68,6 +68,7 @@ class ReconstructionNode(Node):
         stable_base = declare(
             self, "stable_base_tilt_deg", 20.0, "Base for objects toppling at this tilt, deg; 0 = off", 0.0, 45.0
         )
+        join = declare(self, "join_parts", True, "Join an object's separate parts where the view allows")
         visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
         snap = declare(self, "snap_to_depth", True, "Place the seen part of each surface on the observed depth")
         revolutions = declare(
@@ -104,6 +105,7 @@ class ReconstructionNode(Node):
             snap_to_depth=snap,
             complete_revolutions=revolutions,
             stable_base_tilt_deg=stable_base,
+            join_parts=join,
             table_height_m=table_height if fixed_table else None,
         )
         try:

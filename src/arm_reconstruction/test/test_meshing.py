@@ -1,11 +1,14 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 
 from arm_core.camera import look_at
 from arm_reconstruction.grid import GridFrame, frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import (
+    _axis_path,
     add_missed_observed_voxels,
+    connect_parts,
     drop_small_components,
     extrude_to_table,
     keep_observed_components,
@@ -202,6 +205,32 @@ def test_a_top_heavy_object_on_a_point_gains_a_base_where_the_view_allows():
     assert np.array_equal(widen_unstable_base(box, 0.5, grid, tilt_deg=10.0), box)
     lifted = np.roll(probabilities, 2, axis=2)  # on something else, not the table: unchanged
     assert np.array_equal(widen_unstable_base(lifted, 0.5, grid, tilt_deg=10.0), lifted)
+
+
+@pytest.mark.parametrize("end", [(3, 5, 7), (0, 0, 0), (9, 1, 0), (0, 0, 9)])
+def test_join_paths_are_six_connected_along_the_line(end):
+    path = _axis_path(np.array([0, 0, 0]), np.array(end))
+    assert tuple(path[0]) == (0, 0, 0) and tuple(path[-1]) == end
+    assert len(path) == sum(end) + 1 and (np.abs(np.diff(path, axis=0)).sum(axis=1) == 1).all()
+
+
+def test_separate_parts_are_joined_unless_the_view_forbids_it():
+    probabilities = np.zeros((16, 16, 16), np.float32)
+    probabilities[5:10, 5:10, 8:12] = 0.9  # a bowl...
+    probabilities[5:10, 5:10, 0] = 0.9  # ... above its base: the stem was not predicted
+    grid = np.zeros((4, 16, 16, 16), np.float32)
+    grid[3] = 1.0
+    joined = connect_parts(probabilities, 0.5, grid)
+    assert ndimage.label(joined > 0.5)[1] == 1
+    added = (joined > 0.5) & ~(probabilities > 0.5)
+    assert added.sum() == 7 and len(np.unique(np.argwhere(added)[:, :2], axis=0)) == 1, "a one-voxel stem"
+    seen_through = grid.copy()
+    seen_through[2, :, :, 3] = 1.0  # the camera saw the layer under the bowl empty
+    assert np.array_equal(connect_parts(probabilities, 0.5, seen_through), probabilities), "big parts stay"
+    mesh = occupancy_mesh(probabilities, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid)
+    assert len(mesh.split(only_watertight=False)) == 1
+    apart = occupancy_mesh(probabilities, GridFrame(np.zeros(3), 0.01, 16, 0.0), grid=grid, join_parts=False)
+    assert len(apart.split(only_watertight=False)) == 2
 
 
 def test_intersections_are_cut_from_the_larger_mesh():

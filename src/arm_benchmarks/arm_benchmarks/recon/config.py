@@ -55,6 +55,7 @@ class BenchConfig:
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     snap_to_depth: bool = True
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
+    join_parts: bool = True
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4

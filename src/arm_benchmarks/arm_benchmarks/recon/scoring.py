@@ -62,6 +62,7 @@ def load_reconstructors(
     smoothing_iterations: int = 0,
     snap_to_depth: bool = True,
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG,
+    join_parts: bool = True,
 ) -> tuple[dict, dict, dict]:
     """-> (name -> Reconstructor, name -> reason skipped, name -> checkpoint path and sha256). Methods
     sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods."""
@@ -74,6 +75,7 @@ def load_reconstructors(
             smoothing_iterations=smoothing_iterations,
             snap_to_depth=snap_to_depth,
             stable_base_tilt_deg=stable_base_tilt_deg,
+            join_parts=join_parts,
         )
         if checkpoint_dir:
             path = pathlib.Path(checkpoint_dir) / f"{settings.variant}.pt"
@@ -102,6 +104,7 @@ def load_reconstructors(
             k=k,
             snap_to_depth=snap_to_depth,
             stable_base_tilt_deg=stable_base_tilt_deg,
+            join_parts=join_parts,
         )
         only = VisibleOnly(only_settings)
         reconstructors = {VISIBLE_ONLY: only, **reconstructors}
