@@ -58,11 +58,11 @@ def test_latest_frame_processing_keeps_the_lag_bounded(run):
 
 
 def test_memory_growth_below_50_mb(run):
-    """Steady-state growth (median of the last third of the samples minus the first third); single
-    samples swing with the frame being processed."""
-    growth = {k: v["trend_growth_mb"] for k, v in run["load"]["memory"].items()}
+    """Growth of what stays between frames (the lowest sample of the last third minus that of the
+    first): samples taken mid-frame swing by 100 MB and more with the frame being reconstructed."""
+    growth = {k: v["floor_growth_mb"] for k, v in run["load"]["memory"].items()}
     memory = run["load"]["memory"]
-    assert all(g is not None and g < 50.0 for g in growth.values()), f"trend growth (MB) {growth}, {memory}"
+    assert all(g is not None and g < 50.0 for g in growth.values()), f"floor growth (MB) {growth}, {memory}"
 
 
 def test_kill9_of_reconstruction_planner_keeps_meshes_and_pipeline_resumes(run):

@@ -300,6 +300,7 @@ def _figures(phases: dict) -> dict:
             "segmented_frames_hz": load["rates_hz"]["segmentation"],
             "meshes_hz": load["rates_hz"]["reconstruction"],
             "memory_growth_trend_mb": {k: v.get("trend_growth_mb") for k, v in load["memory"].items()},
+            "memory_growth_floor_mb": {k: v.get("floor_growth_mb") for k, v in load["memory"].items()},
             "max_memory_growth_mb": {k: v["max_growth_mb"] for k, v in load["memory"].items()},
             "memory_growth_during_warmup_mb": {
                 k: (round(v["start_mb"] - v["at_first_meshes_mb"], 1) if v["start_mb"] is not None else None)

@@ -13,6 +13,8 @@ def test_grid_text_and_boundary():
 
 
 def test_summary_counts_objects_without_occupancy_as_empty():
-    summary = summarize({"2:32": [(0.004, 0.007, False), (None, 0.007, True), (0.002, 0.005, True)]})["2:32"]
+    rows = [(0.004, 0.007, False, 0.9), (None, 0.007, True, None), (0.002, 0.005, True, 0.8)]
+    summary = summarize({"2:32": rows})["2:32"]
     assert summary["objects"] == 3 and summary["empty"] == 1
     assert np.isclose(summary["chamfer_mm_mean"], 3.0) and np.isclose(summary["cut_fraction"], 2 / 3)
+    assert np.isclose(summary["normal_consistency"], 0.85)

@@ -147,6 +147,9 @@ def run_load(
             "trend_growth_mb": round(float(np.median(series[-third:]) - np.median(series[:third])), 1)
             if series
             else None,
+            # lowest of the last third minus lowest of the first third: what stays between frames (a
+            # leak raises it; a frame's transient allocations, returned to the system, do not)
+            "floor_growth_mb": round(float(min(series[-third:]) - min(series[:third])), 1) if series else None,
         }
     lag = {}
     for stage, values in watch.lags.items():
