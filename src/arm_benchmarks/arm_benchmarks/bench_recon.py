@@ -55,14 +55,7 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
     """Run (or resume) the benchmark and write its outputs; returns the summary."""
     started, started_cpu = time.perf_counter(), time.process_time()
     torch.set_num_threads(max(1, config.threads))
-    reconstructors, skipped, checkpoints = load_reconstructors(
-        config.methods,
-        config.checkpoint_dir,
-        config.smoothing_iterations,
-        config.snap_to_depth,
-        config.stable_base_tilt_deg,
-        config.join_parts,
-    )
+    reconstructors, skipped, checkpoints = load_reconstructors(config.methods, config.checkpoint_dir, config.pipeline())
     out = pathlib.Path(config.out)
     cache_dir = out / "cache" / config.result_key({c["path"] for c in checkpoints.values()})
     pool = []

@@ -160,6 +160,13 @@ def test_visible_only_needs_no_checkpoint(tmp_path):
     assert list(reconstructors) == ["visible-only"] and not skipped and not checkpoints
 
 
+def test_the_run_pipeline_settings_reach_every_method(tmp_path):
+    config = BenchConfig(smoothing_iterations=3, join_parts=False, stable_base_tilt_deg=0.0)
+    reconstructors, _, _ = load_reconstructors(("visible-only",), str(tmp_path), config.pipeline())
+    settings = reconstructors["visible-only"].settings
+    assert (settings.smoothing_iterations, settings.join_parts, settings.stable_base_tilt_deg) == (3, False, 0.0)
+
+
 def synthetic_results():
     """Two objects: arm halves baseline's Chamfer; one arm object and the baseline ones move."""
 

@@ -187,14 +187,12 @@ def widen_unstable_base(probabilities: np.ndarray, threshold: float, grid: np.nd
     footprint = occupied[:, :, 0]
     if tilt_deg <= 0 or not footprint.any():
         return probabilities
-    ijk = np.argwhere(occupied)
-    com = ijk.mean(axis=0)
+    com = np.argwhere(occupied).mean(axis=0)
     reach = (com[2] + 0.5) * np.tan(np.radians(tilt_deg))  # voxels; the table plane is z = -0.5
-    d = occupied.shape[0]
-    ii, jj = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
-    near_foot = np.hypot(ii - com[0], jj - com[1]) <= reach + 1.0
     if _inside_margin(footprint, com[:2]) >= reach:
         return probabilities
+    ii, jj = np.indices(footprint.shape)
+    near_foot = np.hypot(ii - com[0], jj - com[1]) <= reach + 1.0
     base = near_foot & occupied.any(axis=2) & (np.asarray(grid)[3][:, :, 0] > 0) & ~footprint
     if not base.any():
         return probabilities

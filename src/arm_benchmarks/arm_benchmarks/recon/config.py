@@ -33,6 +33,10 @@ TARGET_RUNTIME_S = 900.0
 RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_segmentation", "arm_reconstruction", "arm_planner", "arm_benchmarks")
 
 
+# BenchConfig fields passed to every method's ReconstructionSettings
+PIPELINE_FIELDS = ("smoothing_iterations", "snap_to_depth", "stable_base_tilt_deg", "join_parts")
+
+
 @dataclasses.dataclass(frozen=True)
 class BenchConfig:
     scenes: int = 36
@@ -60,6 +64,10 @@ class BenchConfig:
     view_candidates: int = 8
     qualitative: int = 4
     threads: int = 2
+
+    def pipeline(self) -> dict:
+        """The ReconstructionSettings fields every method's meshes share in this run."""
+        return {name: getattr(self, name) for name in PIPELINE_FIELDS}
 
     def result_key(self, checkpoint_paths) -> str:
         """Run key of the per-scene results: the settings that change them (not scenes, out, qualitative,

@@ -27,7 +27,6 @@ from arm_benchmarks.recon.scenes import (
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_reconstruction.grid import DEFAULT_K, DEFAULT_RESOLUTION
-from arm_reconstruction.meshing import DEFAULT_STABLE_BASE_TILT_DEG
 from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency, volumetric_iou
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor, StageTimer, resolve_checkpoint_path
@@ -56,27 +55,16 @@ def file_digest(path) -> str:
     return hashlib.sha256(pathlib.Path(path).read_bytes()).hexdigest()
 
 
-def load_reconstructors(
-    methods,
-    checkpoint_dir: str = "",
-    smoothing_iterations: int = 0,
-    snap_to_depth: bool = True,
-    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG,
-    join_parts: bool = True,
-) -> tuple[dict, dict, dict]:
+def load_reconstructors(methods, checkpoint_dir: str = "", pipeline: dict | None = None) -> tuple[dict, dict, dict]:
     """-> (name -> Reconstructor, name -> reason skipped, name -> checkpoint path and sha256). Methods
-    sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods."""
+    sharing a network variant share one loaded model; a missing or broken checkpoint skips its methods.
+    pipeline: ReconstructionSettings fields every method shares (BenchConfig.pipeline(); {} = defaults)."""
+    pipeline = pipeline or {}
     reconstructors, skipped, checkpoints, by_variant = {}, {}, {}, {}
     for name in methods:
         if name not in METHODS:
             continue
-        settings = ReconstructionSettings(
-            method=name,
-            smoothing_iterations=smoothing_iterations,
-            snap_to_depth=snap_to_depth,
-            stable_base_tilt_deg=stable_base_tilt_deg,
-            join_parts=join_parts,
-        )
+        settings = ReconstructionSettings(method=name, **pipeline)
         if checkpoint_dir:
             path = pathlib.Path(checkpoint_dir) / f"{settings.variant}.pt"
             settings = dataclasses.replace(settings, checkpoint_path=str(path))
@@ -99,12 +87,7 @@ def load_reconstructors(
         resolution = reconstructors["arm"].resolution if "arm" in reconstructors else max(resolutions, default=0)
         k = reconstructors["arm"].k if "arm" in reconstructors else DEFAULT_K
         only_settings = ReconstructionSettings(
-            method="baseline",
-            resolution=resolution or DEFAULT_RESOLUTION,
-            k=k,
-            snap_to_depth=snap_to_depth,
-            stable_base_tilt_deg=stable_base_tilt_deg,
-            join_parts=join_parts,
+            method="baseline", resolution=resolution or DEFAULT_RESOLUTION, k=k, **pipeline
         )
         only = VisibleOnly(only_settings)
         reconstructors = {VISIBLE_ONLY: only, **reconstructors}
@@ -150,7 +133,11 @@ def _score_method(reconstructor, grids, labels, frame, truths: dict, match: dict
         obj = built.get(match.get(truth_id, -1))
         if obj is None:
             entries[truth_id] = {
-                "empty": True, "chamfer_m": None, "normal_consistency": None, "iou": 0.0, "displacement_m": None
+                "empty": True,
+                "chamfer_m": None,
+                "normal_consistency": None,
+                "iou": 0.0,
+                "displacement_m": None,
             }
             continue
         mesh = meshes[truth_id] = obj.world_mesh()
