@@ -236,6 +236,19 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
+    parser.add_argument("--horizon", type=int, default=5, help="MPPI horizon, control steps (paper: 5)")
+    parser.add_argument(
+        "--push-hand-speed",
+        type=float,
+        default=PlannerConfig.push_hand_speed_m_s,
+        help="push: the hand's top speed near and at the object, m/s (0: no cap)",
+    )
+    parser.add_argument(
+        "--push-contact-height",
+        type=float,
+        default=PlannerConfig.push_contact_height_m,
+        help="push: the hand's contact height above the object's bottom, m",
+    )
     parser.add_argument(
         "--node-twin",
         action="store_true",
@@ -284,6 +297,9 @@ def main(argv=None) -> int:
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
     config.mppi.num_paths = args.num_paths
+    config.mppi.horizon = args.horizon
+    config.push_hand_speed_m_s = args.push_hand_speed
+    config.push_contact_height_m = args.push_contact_height
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
     config.sleep_tolerance = args.sleep_tolerance
@@ -318,6 +334,12 @@ def main(argv=None) -> int:
             "rest_creeping": config.rest_creeping_every_step,
             "sleep_tolerance": args.sleep_tolerance,
         }
+    if args.horizon != 5:
+        settings["horizon"] = args.horizon
+    if args.push_hand_speed != PlannerConfig.push_hand_speed_m_s:
+        settings["push_hand_speed_m_s"] = args.push_hand_speed
+    if args.push_contact_height != PlannerConfig.push_contact_height_m:
+        settings["push_contact_height_m"] = args.push_contact_height
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(

@@ -237,6 +237,24 @@ class ControlLimits:
 
 RewardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(states [N, H, nstate], controls [N, H, nu]) -> rewards [N, H]."""
+RateFilter = Callable[[np.ndarray], np.ndarray]
+"""Sampled rates [N, H, nu] -> rates within a task's constraint (must keep convex combinations within it)."""
+
+
+def linear_speed_cap(jac_linear: np.ndarray, actuators: np.ndarray, max_speed_m_s: float) -> RateFilter:
+    """Rates scaled down, per path and step, so the point with linear Jacobian `jac_linear` [3, len(actuators)]
+    (w.r.t. the rates of `actuators`) moves at most max_speed_m_s. A ball is convex, so the weighted
+    average of capped rates is capped too."""
+    actuators = np.asarray(actuators, dtype=int)
+
+    def cap(rates: np.ndarray) -> np.ndarray:
+        speed = np.linalg.norm(rates[..., actuators] @ jac_linear.T, axis=-1)
+        scale = np.minimum(1.0, max_speed_m_s / np.maximum(speed, 1e-12))
+        out = rates.copy()
+        out[..., actuators] *= scale[..., None]
+        return out
+
+    return cap
 
 
 @dataclass
@@ -290,12 +308,14 @@ class Mppi:
         noise_basis: np.ndarray,
         fixed_controls: dict[int, float] | None = None,
         num_paths: int | None = None,
+        rate_filter: RateFilter | None = None,
     ) -> StepResult:
         """One MPPI iteration from `state`; returns the next control (targets) to execute.
 
         `noise_basis` [k, nu]: rows are rate directions (with scale, ctrl units / s) noise is drawn along.
         `fixed_controls`: actuator index -> target forced over the whole horizon (e.g. the gripper).
         `num_paths`: paths sampled this step (default config.num_paths).
+        `rate_filter`: a constraint applied to every sampled rate sequence (e.g. linear_speed_cap).
         """
         cfg = self.config
         rates = np.clip(
@@ -305,6 +325,8 @@ class Mppi:
         fixed = fixed_controls or {}
         for a in fixed:
             rates[..., a] = 0.0
+        if rate_filter is not None:
+            rates = rate_filter(rates)
         controls = self.limits.integrate(previous, rates, cfg.control_dt_s)
         for a, value in fixed.items():
             controls[..., a] = value

@@ -78,6 +78,14 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     }
     config.task_steps = {task: steps for task, steps in task_steps.items() if steps}
     config.done_hold_steps = declare(node, "done_hold_steps", 10, "Stop once the goal held this many steps", 0, 1000)
+    config.push_hand_speed_m_s = declare(
+        node,
+        "push_hand_speed_m_s",
+        PlannerConfig.push_hand_speed_m_s,
+        "Push: the hand's top speed at and near the object, m/s (0: no cap)",
+        0.0,
+        2.0,
+    )
     timestep = declare(node, "twin_timestep_s", 0.01, "Twin physics step, s (divides control_dt_s)", 0.001, 0.02)
     return config, timestep
 

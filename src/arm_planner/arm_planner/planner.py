@@ -23,6 +23,7 @@ from arm_planner.mppi import (
     PathBudget,
     free_body_trees,
     get_state,
+    linear_speed_cap,
     set_sleep,
     state_layout,
 )
@@ -110,6 +111,14 @@ class PlannerConfig:
     # ... and the target is within this distance of the reward's goal (tighter than the task's
     # tolerance, for margin against twin/world mismatch), m.
     done_goal_distance_m: float = 0.01
+    # Push: the hand's top speed (m/s) while pushing or within the reward's disengage distance of its
+    # contact point, as a cap on every sampled path (0: no cap). Uncapped, the hand slid top-heavy
+    # objects at up to 0.75 m/s and they tipped over; 0.2: push-only bench_manip, ground truth 19 of 42
+    # against 17, arm 17 of 38 against 13 (docs/experiments.md). 0.1 stalled at the first contact.
+    push_hand_speed_m_s: float = 0.2
+    # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
+    # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
+    push_contact_height_m: float = 0.018
 
 
 @dataclass
@@ -237,7 +246,12 @@ class Planner:
             velocity_adr = None
             if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
                 velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
-            reward = PushReward(**common, goal_displacement=displacement, target_vel_adr=velocity_adr)
+            reward = PushReward(
+                **common,
+                goal_displacement=displacement,
+                target_vel_adr=velocity_adr,
+                contact_height_m=self.config.push_contact_height_m,
+            )
         else:
             raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
         if request.start_com_world is not None:
@@ -247,9 +261,8 @@ class Planner:
             reward.resume(request.resume_state, request.resume_steps_in_state)
         return reward
 
-    def noise_basis(self, data: mujoco.MjData) -> np.ndarray:
-        """Rows: joint-space directions that move the TCP along x, y, z and rotate it, plus joint noise."""
-        n = self.config.noise
+    def tcp_jacobian(self, data: mujoco.MjData) -> np.ndarray:
+        """[6, arm joints]: the TCP's linear (m/s) then angular (rad/s) velocity per arm joint rate."""
         mujoco.mj_kinematics(self.model, data)
         mujoco.mj_comPos(self.model, data)
         jacp = np.zeros((3, self.model.nv))
@@ -258,7 +271,13 @@ class Planner:
             self.robot.spec.tcp_offset_m
         )
         mujoco.mj_jac(self.model, data, jacp, jacr, tcp_world, self.robot.tcp_body)
-        jac = np.concatenate([jacp, jacr])[:, self.robot.dof_adr]
+        return np.concatenate([jacp, jacr])[:, self.robot.dof_adr]
+
+    def noise_basis(self, data: mujoco.MjData, jac: np.ndarray | None = None) -> np.ndarray:
+        """Rows: joint-space directions that move the TCP along x, y, z and rotate it, plus joint noise.
+        jac: the TCP Jacobian at `data` if already computed."""
+        n = self.config.noise
+        jac = self.tcp_jacobian(data) if jac is None else jac
         pinv = jac.T @ np.linalg.inv(jac @ jac.T + n.damping**2 * np.eye(6))
         stds = np.array([n.linear_std_m_s] * 3 + [n.angular_std_rad_s] * 3)
         arm_rows = np.concatenate([(pinv * stds).T, n.joint_std_rad_s * np.eye(len(self.robot.arm_actuators))])
@@ -328,7 +347,13 @@ class Planner:
             state = get_state(model, data)
             gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
             fixed = {int(robot.gripper_actuator): gripper}
-            result = self.mppi.step(state, ctrl, reward, self.noise_basis(data), fixed, num_paths=paths)
+            jac = self.tcp_jacobian(data)
+            speed_cap = None
+            if cfg.push_hand_speed_m_s > 0 and request.task == TASK_PUSH and reward.near_contact:
+                speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cfg.push_hand_speed_m_s)
+            result = self.mppi.step(
+                state, ctrl, reward, self.noise_basis(data, jac), fixed, num_paths=paths, rate_filter=speed_cap
+            )
             step_ms.append(1e3 * (time.perf_counter() - t0))
             step_cpu_ms.append(1e3 * (time.process_time() - c0))
             step_paths.append(paths)

@@ -262,6 +262,8 @@ class PushReward(TaskReward):
     settled_m: float = 0.015
     retreat_gap_m: float = 0.04
     state: str = "approaching"
+    # Pushing, or the hand within disengage_distance_m of its contact point (set by update()).
+    near_contact: bool = False
 
     def __post_init__(self):
         g = self.geometry
@@ -358,6 +360,7 @@ class PushReward(TaskReward):
             self.state = "pushing"
         elif self.state == "pushing" and distance > self.disengage_distance_m:
             self.state = "approaching"
+        self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
         return self.state
 
     def error(self, state: np.ndarray) -> float:

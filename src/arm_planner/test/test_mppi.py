@@ -11,6 +11,7 @@ from arm_planner.mppi import (
     PathBudget,
     free_body_trees,
     get_state,
+    linear_speed_cap,
     set_sleep,
     state_layout,
 )
@@ -105,6 +106,53 @@ def test_mppi_steers_the_gantry_to_a_point():
         mppi.shift()
     mujoco.mj_forward(model, data)
     assert np.linalg.norm(data.xpos[hand] - goal) < 0.1 * start
+    mppi.close()
+
+
+def test_speed_cap_scales_only_fast_steps_and_keeps_averages_capped():
+    jac = np.array([[1.0, 0.0], [0.0, 2.0], [0.0, 0.0]])  # two actuators -> x, y (m/s per unit rate)
+    cap = linear_speed_cap(jac, np.array([0, 2]), 0.1)
+    rates = np.zeros((50, 4, 3))
+    rates[..., [0, 2]] = np.random.default_rng(0).normal(0.0, 0.2, (50, 4, 2))
+    rates[0, 0, [0, 2]] = [0.01, 0.02]  # 0.041 m/s: under the cap
+    rates[..., 1] = 7.0  # not a capped actuator
+    capped = cap(rates)
+    speed = np.linalg.norm(capped[..., [0, 2]] @ jac.T, axis=-1)
+    assert speed.max() <= 0.1 + 1e-12
+    np.testing.assert_allclose(capped[0, 0], rates[0, 0])
+    np.testing.assert_array_equal(capped[..., 1], 7.0)
+    before = np.linalg.norm(rates[..., [0, 2]] @ jac.T, axis=-1)
+    np.testing.assert_allclose(speed[before > 0.1], 0.1)
+    average = np.einsum("n,nhu->hu", np.full(50, 1 / 50), capped)
+    assert np.linalg.norm(average[:, [0, 2]] @ jac.T, axis=-1).max() <= 0.1 + 1e-12
+
+
+def test_mppi_with_a_speed_cap_moves_the_gantry_no_faster_than_it():
+    model = gantry_model()
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    qpos_offset, _ = state_layout(model)
+    goal = np.array([0.3, 0.0, 0.0])
+
+    def reward(states, controls):
+        return -np.linalg.norm(states[..., qpos_offset : qpos_offset + 3] - goal, axis=-1)
+
+    mppi = Mppi(model, MppiConfig(nthread=1, seed=1), ControlLimits.from_model(model, 0.5))
+    basis = np.zeros((3, model.nu))
+    basis[[0, 1, 2], [0, 1, 2]] = 0.3
+    cap = linear_speed_cap(np.eye(3), np.arange(3), 0.05)
+    control, start = data.ctrl.copy(), data.qpos[:3].copy()
+    for _ in range(40):
+        result = mppi.step(get_state(model, data), control, reward, basis, rate_filter=cap)
+        assert np.linalg.norm(result.control[:3] - control[:3]) <= 0.05 * mppi.config.control_dt_s + 1e-9
+        for target in mppi.rollout.substep_controls(control, result.control[None, None])[0]:
+            data.ctrl[:] = target
+            mujoco.mj_step(model, data)
+        control = result.control
+        mppi.shift()
+    moved = np.linalg.norm(data.qpos[:3] - start)
+    assert 0.02 < moved <= 0.05 * 40 * mppi.config.control_dt_s + 0.005
     mppi.close()
 
 
