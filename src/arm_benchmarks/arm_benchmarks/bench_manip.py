@@ -32,7 +32,7 @@ from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, 
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
 from arm_core.run_key import run_key
 from arm_core.stats import json_safe, median
-from arm_planner.mppi import STATE_SPEC
+from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.session import ManipulationSession
@@ -236,7 +236,9 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
-    parser.add_argument("--horizon", type=int, default=5, help="MPPI horizon, control steps (paper: 5)")
+    parser.add_argument(
+        "--horizon", type=int, default=MppiConfig.horizon, help="MPPI horizon, control steps (paper: 5)"
+    )
     parser.add_argument(
         "--push-hand-speed",
         type=float,
@@ -334,12 +336,15 @@ def main(argv=None) -> int:
             "rest_creeping": config.rest_creeping_every_step,
             "sleep_tolerance": args.sleep_tolerance,
         }
-    if args.horizon != 5:
-        settings["horizon"] = args.horizon
-    if args.push_hand_speed != PlannerConfig.push_hand_speed_m_s:
-        settings["push_hand_speed_m_s"] = args.push_hand_speed
-    if args.push_contact_height != PlannerConfig.push_contact_height_m:
-        settings["push_contact_height_m"] = args.push_contact_height
+    settings |= {  # only when not the default: keys of earlier runs stay valid
+        name: value
+        for name, value, default in (
+            ("horizon", args.horizon, MppiConfig.horizon),
+            ("push_hand_speed_m_s", args.push_hand_speed, PlannerConfig.push_hand_speed_m_s),
+            ("push_contact_height_m", args.push_contact_height, PlannerConfig.push_contact_height_m),
+        )
+        if value != default
+    }
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(

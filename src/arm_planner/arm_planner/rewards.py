@@ -288,6 +288,7 @@ class PushReward(TaskReward):
         if state not in ("approaching", "pushing"):
             raise ValueError(f"cannot resume a push in state {state!r}")
         self.state = state
+        self.near_contact = state == "pushing"
 
     def _direction(self, target_pos: np.ndarray) -> np.ndarray:
         """Push direction: towards a point aim_beyond_m past the goal along the commanded displacement,

@@ -32,6 +32,15 @@ def test_rest_point_adds_the_sliding_distance_of_the_objects_velocity():
     np.testing.assert_allclose(still, 0.0)
 
 
+def test_a_push_resumed_while_pushing_counts_as_near_the_object_from_its_first_step():
+    reward = _push()
+    assert not reward.near_contact
+    reward.resume("pushing", 12)
+    assert reward.near_contact
+    reward.resume("approaching", 0)
+    assert not reward.near_contact
+
+
 def test_push_direction_does_not_swing_round_at_or_just_past_the_goal():
     reward = _push()
     nominal = GOAL[:2] / np.linalg.norm(GOAL[:2])
