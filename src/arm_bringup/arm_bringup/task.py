@@ -21,7 +21,9 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
     reachable = [o for o in meshes.objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < 0.7]
     target = max(reachable or meshes.objects, key=lambda o: o.visible_fraction)
-    goal = Manipulate.Goal(task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id)
+    goal = Manipulate.Goal(
+        task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id, meshes_stamp=meshes.header.stamp
+    )
     if task == "push":
         goal.goal_displacement.x, goal.goal_displacement.y = 0.05, -0.30
     elif task == "rearrange":

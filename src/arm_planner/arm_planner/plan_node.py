@@ -1,13 +1,15 @@
 """plan_node: action /arm/manipulate -> MPPI plan in the MuJoCo twin -> /arm/joint_trajectory.
 
-Subscribes /arm/meshes (reliable, transient-local) and /joint_states and keeps only the latest of
-each. One goal is served at a time; a goal arriving while another plans is rejected. Every refusal
+Subscribes /arm/meshes (reliable, transient-local) and keeps the last scene_history arrays, so a goal
+plans on the array its target id was read from (goal.meshes_stamp; zero: the latest). Keeps only the
+latest /joint_states. One goal is served at a time; a goal arriving while another plans is rejected. Every refusal
 (no meshes, unknown target, degenerate mesh, goal out of reach, non-finite joint states, twin
 compilation failure, planning error) aborts the goal with the reason in the result; the node keeps
 serving. With stream:=true (open loop) the controller executes the plan while it is being planned
 (receding horizon, streaming.TrajectoryStream): the first part once stream_lead_s of motion is planned,
 the rest in parts every stream_period_s. With replan_period_s > 0 the plan is executed in chunks of
-that length and re-planned from the newest joint states and meshes after each chunk (closed loop).
+that length and re-planned from the newest joint states and meshes after each chunk (closed loop), the
+target found again in newer meshes as the object nearest its last centre.
 /diagnostics reports the real-time factor of the last plan (planning wall time / planned motion).
 """
 
@@ -31,6 +33,7 @@ from arm_interfaces.msg import ReconstructedObjectArray
 from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
+from arm_planner.scenes import Scene, SceneHistory, follow_target
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.streaming import TrajectoryStream
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
@@ -111,12 +114,21 @@ class PlanNode(Node):
         self.max_object_size_m = declare(
             self, "max_object_size_m", 1.0, "Leave objects larger than this out of the twin, m", 0.01, 100.0
         )
+        self.replan_target_radius_m = declare(
+            self,
+            "replan_target_radius_m",
+            0.15,
+            "Closed loop: newer meshes' target is the object nearest the last one's centre, within this, m",
+            0.0,
+            10.0,
+        )
+        history = declare(self, "scene_history", 20, "/arm/meshes arrays kept for goals naming one by stamp", 1, 1000)
         self.session = ManipulationSession(config, timestep)
         self.finger_joint = self.session.robot.trajectory_joint_names[-1]
         self.errors = RateLimitedErrors(self.get_logger())
 
         self._lock = threading.Lock()
-        self._objects = None  # (objects, table_height_m, dropped) from the latest /arm/meshes
+        self._scenes = SceneHistory(history)  # the last /arm/meshes arrays, by stamp
         self._joints = None  # (arm_q, opening, node-clock ns at receipt) from the latest valid /joint_states
         self._joint_error = ""
         self._busy = False
@@ -155,8 +167,9 @@ class PlanNode(Node):
             return
         for object_id, reason in dropped.items():
             self.errors.error(f"object {object_id}", f"object {object_id} left out of the twin: {reason}")
+        stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         with self._lock:
-            self._objects = (objects, table_height_m, dropped)
+            self._scenes.add(Scene(objects, table_height_m, stamp_ns, dropped))
             self.meshes_received += 1
 
     def on_joint_states(self, msg: JointState) -> None:
@@ -182,15 +195,44 @@ class PlanNode(Node):
 
     def _robot_state(self):
         with self._lock:
-            joints, error, objects = self._joints, self._joint_error, self._objects
+            joints, error = self._joints, self._joint_error
         if error:
-            return None, f"latest joint states are invalid: {error}", objects
+            return None, f"latest joint states are invalid: {error}"
         if joints is None:
-            return None, "no joint states received yet", objects
+            return None, "no joint states received yet"
         age_s = 1e-9 * (self.get_clock().now().nanoseconds - joints[2])  # ROS time: simulated with use_sim_time
         if self.joint_state_timeout_s > 0 and age_s > self.joint_state_timeout_s:
-            return None, f"joint states are older than {self.joint_state_timeout_s} s", objects
-        return joints, "", objects
+            return None, f"joint states are older than {self.joint_state_timeout_s} s"
+        return joints, ""
+
+    def _goal_scene(self, goal) -> tuple[Scene | None, str]:
+        """The meshes the goal's target id refers to, or why there are none."""
+        stamp_ns = int(goal.meshes_stamp.sec) * 1_000_000_000 + int(goal.meshes_stamp.nanosec)
+        with self._lock:
+            scene, held = self._scenes.stamped(stamp_ns), self._scenes.stamps_ns()
+        if scene is not None:
+            return scene, ""
+        if not held:
+            return None, "no reconstructed objects received yet (/arm/meshes)"
+        return None, (
+            f"no /arm/meshes array stamped {stamp_ns} ns is held (the last {len(held)} span "
+            f"{min(held)}-{max(held)} ns); take target_id from a recent array"
+        )
+
+    def _newer_scene(self, scene: Scene, target_id: int) -> tuple[Scene, int]:
+        """Closed loop: the latest meshes and the target's id in them, or the given ones if the target
+        cannot be found there."""
+        with self._lock:
+            latest = self._scenes.latest()
+        if latest is scene:
+            return scene, target_id
+        followed = follow_target(scene, target_id, latest, self.replan_target_radius_m)
+        if followed is None:
+            self.errors.error(
+                "replan target", f"target {target_id} not found in newer meshes; re-planning on the older ones"
+            )
+            return scene, target_id
+        return latest, followed
 
     def _stream_part(self, stream: TrajectoryStream, joint_names) -> None:
         part = stream.part(1e-9 * self.get_clock().now().nanoseconds)
@@ -200,14 +242,20 @@ class PlanNode(Node):
             self.pub_trajectory.publish(msg)
 
     def _plan_once(
-        self, goal_handle, task: str, goal, resume: tuple | None, start_com, stream: TrajectoryStream | None = None
+        self,
+        goal_handle,
+        task: str,
+        goal,
+        scene: Scene,
+        target_id: int,
+        resume: tuple | None,
+        start_com,
+        stream: TrajectoryStream | None = None,
     ) -> Outcome:
-        joints, problem, objects = self._robot_state()
+        joints, problem = self._robot_state()
         if problem:
             return Outcome(False, problem)
-        if objects is None:
-            return Outcome(False, "no reconstructed objects received yet (/arm/meshes)")
-        self.session.set_objects(objects[0], objects[1])
+        self.session.set_objects(scene.objects, scene.table_height_m)
         feedback = Manipulate.Feedback()
 
         def on_step(step: int, total: int, state: str, error_m: float) -> None:
@@ -227,7 +275,7 @@ class PlanNode(Node):
         started = time.perf_counter()
         outcome = self.session.request(
             task,
-            int(goal.target_id),
+            target_id,
             displacement,
             float(goal.tolerance_m),
             joints[0],
@@ -310,14 +358,18 @@ class PlanNode(Node):
         return result
 
     def _run(self, goal_handle, task: str, goal):
+        scene, problem = self._goal_scene(goal)
+        if scene is None:
+            return Outcome(False, problem), JointTrajectory()
+        target_id = int(goal.target_id)
         if self.replan_period_s <= 0 and self.stream:
             stream = TrajectoryStream(self.session.config.mppi.control_dt_s, self.stream_lead_s, self.stream_period_s)
-            outcome = self._plan_once(goal_handle, task, goal, None, None, stream)
+            outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None, stream)
             if not outcome.planned:
                 return outcome, JointTrajectory()
             result = outcome.result
             return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
-        outcome = self._plan_once(goal_handle, task, goal, None, None)
+        outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
         if not outcome.planned or self.replan_period_s <= 0:
             return outcome, (self._publish(outcome) if outcome.planned else JointTrajectory())
         start_com, resume, executed = outcome.start_com_world, None, JointTrajectory()
@@ -336,7 +388,8 @@ class PlanNode(Node):
             if not waited:  # shutdown
                 break
             resume = resume_point(result.states, chunk)
-            replanned = self._plan_once(goal_handle, task, goal, resume, start_com)
+            scene, target_id = self._newer_scene(scene, target_id)
+            replanned = self._plan_once(goal_handle, task, goal, scene, target_id, resume, start_com)
             if not replanned.planned:
                 self.errors.error("replan", f"re-planning failed, keeping the executed prefix: {replanned.message}")
                 break
@@ -346,7 +399,8 @@ class PlanNode(Node):
     # --- diagnostics -------------------------------------------------------------------------
     def publish_diagnostics(self) -> None:
         with self._lock:
-            ids = sorted(o.id for o in self._objects[0]) if self._objects else []
+            latest = self._scenes.latest()
+            ids = sorted(o.id for o in latest.objects) if latest else []
             busy = self._busy
         objects = len(ids)
         values = {

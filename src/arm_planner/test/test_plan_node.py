@@ -54,20 +54,24 @@ def _wait(future, timeout=60.0):
     return future.result()
 
 
-def _send(action, task, target_id, displacement=(0.0, 0.0, 0.0)):
+def _send(action, task, target_id, displacement=(0.0, 0.0, 0.0), meshes_stamp_s=0):
     goal = Manipulate.Goal(task=task, target_id=target_id)
+    goal.meshes_stamp.sec = meshes_stamp_s
     goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z = displacement
     handle = _wait(action.send_goal_async(goal))
     assert handle.accepted
     return _wait(handle.get_result_async()).result
 
 
-def _publish_inputs(client, joint_positions):
+def _publish_inputs(client, joint_positions, object_id=4, stamp_s=0):
     box = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
     T = np.eye(4)
     T[:3, 3] = (0.0, 0.0, 0.04)
     meshes = ReconstructedObjectArray(table_height_m=0.0)
-    meshes.objects = [ReconstructedObject(id=4, pose=matrix_to_pose(T), mesh=mesh_to_msg(box.vertices, box.faces))]
+    meshes.header.stamp.sec = stamp_s
+    meshes.objects = [
+        ReconstructedObject(id=object_id, pose=matrix_to_pose(T), mesh=mesh_to_msg(box.vertices, box.faces))
+    ]
     client.create_publisher(ReconstructedObjectArray, "arm/meshes", latched_qos()).publish(meshes)
     joints = client.create_publisher(JointState, "joint_states", 1)
     names = list(robot.JOINT_NAMES) + [robot.FINGER_JOINT_NAMES[0]]
@@ -78,7 +82,7 @@ def _publish_inputs(client, joint_positions):
 def test_refusals_then_a_plan(graph):
     node, client, action, received = graph
     result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
-    assert not result.success and "no joint states" in result.message
+    assert not result.success and "no reconstructed objects" in result.message
     joints, names = _publish_inputs(client, list(robot.HOME_Q) + [0.04])
     deadline = time.monotonic() + 10
     while node.meshes_received == 0 or node._joints is None:
@@ -156,3 +160,19 @@ def test_streamed_parts_join_into_the_plan(graph):
     assert starts[-1] + len(parts[-1].points) == len(positions)
     assert node.plan_figures["stream_parts"] == len(parts)
     assert node.plan_figures["realtime_factor"] > 0
+
+
+def test_goal_plans_on_the_meshes_its_stamp_names(graph):
+    node, client, action, _ = graph
+    for object_id, stamp_s in ((4, 100), (7, 101)):  # the same box, relabelled in a later frame
+        received = node.meshes_received
+        _publish_inputs(client, list(robot.HOME_Q) + [0.04], object_id=object_id, stamp_s=stamp_s)
+        deadline = time.monotonic() + 10
+        while node.meshes_received == received:  # one at a time: the subscription keeps only the last
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+    result = _send(action, Manipulate.Goal.TASK_PUSH, 4, (0.05, -0.3, 0.0), meshes_stamp_s=100)
+    assert len(result.trajectory.points) == 5, result.message
+    assert "unknown target id 4" in _send(action, Manipulate.Goal.TASK_GRASP, 4).message  # latest: stamp 101
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4, meshes_stamp_s=99)
+    assert "no /arm/meshes array stamped 99000000000 ns" in result.message

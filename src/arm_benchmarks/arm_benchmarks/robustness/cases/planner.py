@@ -132,9 +132,12 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
     action = ActionClient(probe.node, Manipulate, "arm/manipulate")
     ready = action.wait_for_server(timeout_sec=60.0)
 
-    def goal(task=Manipulate.Goal.TASK_GRASP, target_id=1, displacement=(0.0, 0.0, 0.0), tolerance_m=0.0):
+    def goal(
+        task=Manipulate.Goal.TASK_GRASP, target_id=1, displacement=(0.0, 0.0, 0.0), tolerance_m=0.0, meshes_stamp_s=0
+    ):
         started = time.monotonic()
         g = Manipulate.Goal(task=task, target_id=target_id, tolerance_m=tolerance_m)
+        g.meshes_stamp.sec = meshes_stamp_s
         g.goal_displacement.x, g.goal_displacement.y, g.goal_displacement.z = displacement
         handle_future = probe.in_executor(lambda: action.send_goal_async(g))
         if not probe.wait_until(lambda: handle_future.done() or not process.alive(), 30.0) or not process.alive():
@@ -198,6 +201,7 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
     publish_meshes(_mesh_case(None)())
     for name, kwargs in [
         ("unknown target id 999", {"target_id": 999}),
+        ("meshes_stamp of no array held", {"meshes_stamp_s": 12345}),
         ("unknown task 9", {"task": 9}),
         ("NaN goal displacement", {"task": Manipulate.Goal.TASK_PUSH, "displacement": (float("nan"), 0.0, 0.0)}),
         ("negative tolerance", {"task": Manipulate.Goal.TASK_PUSH, "displacement": (0.05, 0, 0), "tolerance_m": -1.0}),
