@@ -30,7 +30,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
-from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
+from arm_planner.messages import TASK_NAMES, joint_state_arrays, time_ns, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
 from arm_planner.scenes import Scene, SceneHistory, follow_target
@@ -167,9 +167,8 @@ class PlanNode(Node):
             return
         for object_id, reason in dropped.items():
             self.errors.error(f"object {object_id}", f"object {object_id} left out of the twin: {reason}")
-        stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         with self._lock:
-            self._scenes.add(Scene(objects, table_height_m, stamp_ns, dropped))
+            self._scenes.add(Scene(objects, table_height_m, time_ns(msg.header.stamp), dropped))
             self.meshes_received += 1
 
     def on_joint_states(self, msg: JointState) -> None:
@@ -207,7 +206,7 @@ class PlanNode(Node):
 
     def _goal_scene(self, goal) -> tuple[Scene | None, str]:
         """The meshes the goal's target id refers to, or why there are none."""
-        stamp_ns = int(goal.meshes_stamp.sec) * 1_000_000_000 + int(goal.meshes_stamp.nanosec)
+        stamp_ns = time_ns(goal.meshes_stamp)
         with self._lock:
             scene, held = self._scenes.stamped(stamp_ns), self._scenes.stamps_ns()
         if scene is not None:
