@@ -127,6 +127,12 @@ def parse_args(argv=None) -> BenchConfig:
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument(
+        "--occupancy-threshold",
+        type=float,
+        default=defaults.threshold,
+        help="occupancy probability of a solid voxel, for every network method",
+    )
+    parser.add_argument(
         "--smoothing-iterations", type=int, default=DEFAULT_SMOOTHING_ITERATIONS, help="Taubin smoothing of meshes"
     )
     parser.add_argument(
@@ -157,6 +163,8 @@ def parse_args(argv=None) -> BenchConfig:
         parser.error("need --scenes >= 1, 1 <= --min-objects <= --max-objects, --min-visible-pixels >= 10")
     if args.chamfer_samples < 1 or args.iou_resolution < 8 or args.settle_s <= 0 or args.stable_threshold_m <= 0:
         parser.error("need --chamfer-samples >= 1, --iou-resolution >= 8, positive --settle-s and threshold")
+    if not 0 < args.occupancy_threshold < 1:
+        parser.error("need 0 < --occupancy-threshold < 1")
     if not 0 < args.physics_timestep_s <= 0.02 or min(args.threads, args.view_candidates) < 1 or args.qualitative < 0:
         parser.error("need 0 < --physics-timestep-s <= 0.02, --threads and --view-candidates >= 1, --qualitative >= 0")
     return BenchConfig(
@@ -177,6 +185,7 @@ def parse_args(argv=None) -> BenchConfig:
         stable_threshold_m=args.stable_threshold_m,
         depth_noise=not args.no_noise,
         domain=args.domain,
+        threshold=args.occupancy_threshold,
         smoothing_iterations=args.smoothing_iterations,
         snap_to_depth=not args.no_snap,
         stable_base_tilt_deg=args.stable_base_tilt_deg,

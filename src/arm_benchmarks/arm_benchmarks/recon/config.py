@@ -7,7 +7,7 @@ import pathlib
 
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_core.run_key import run_key
-from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS, DEFAULT_STABLE_BASE_TILT_DEG
+from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS, DEFAULT_STABLE_BASE_TILT_DEG, DEFAULT_THRESHOLD
 from arm_reconstruction.metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION
 from arm_sim.appearance import DEFAULT_DOMAIN
 
@@ -34,7 +34,7 @@ RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_segmentation", "arm_reconstructio
 
 
 # BenchConfig fields passed to every method's ReconstructionSettings
-PIPELINE_FIELDS = ("smoothing_iterations", "snap_to_depth", "stable_base_tilt_deg", "join_parts")
+PIPELINE_FIELDS = ("threshold", "smoothing_iterations", "snap_to_depth", "stable_base_tilt_deg", "join_parts")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +56,7 @@ class BenchConfig:
     stable_threshold_m: float = 0.01
     depth_noise: bool = True
     domain: str = DEFAULT_DOMAIN
+    threshold: float = DEFAULT_THRESHOLD
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
     snap_to_depth: bool = True
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
