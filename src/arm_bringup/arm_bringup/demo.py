@@ -87,9 +87,20 @@ def run_graph(graph: Graph, node, observer: Observer, args, out: pathlib.Path, s
     summary["objects"] = [{"id": o.id, "visible_fraction": round(o.visible_fraction, 3)} for o in truth.objects]
     summary["camera_K"] = K_from_camera_info(observer.latest["camera/camera_info"]).round(2).tolist()
 
-    seg_labels = None
+    segmented = None
     if "segmentation" in stages and observer.wait(["arm/segmented_frame"], 120.0):
-        seg_labels = image_to_numpy(observer.latest["arm/segmented_frame"].labels)
+        segmented = observer.latest["arm/segmented_frame"]
+
+    meshes = None
+    if "reconstruction" in stages and observer.wait(["arm/meshes"], 180.0):
+        meshes = observer.latest["arm/meshes"]
+        summary["reconstruction"] = reconstruction_errors(meshes, truth)
+        plot_reconstruction_vs_truth(out / "reconstruction_vs_truth.png", meshes, truth, T_world_camera)
+        # Report the segmentation the meshes were built from (frames differ in their noise).
+        segmented = observer.segmented_frame_for(meshes.header) or segmented
+
+    seg_labels = None if segmented is None else image_to_numpy(segmented.labels)
+    if seg_labels is not None:
         summary["segmented_instances"] = int(len(np.unique(seg_labels)) - 1)
     plot_camera_segmentation(
         out / "camera_segmentation.png",
@@ -99,12 +110,6 @@ def run_graph(graph: Graph, node, observer: Observer, args, out: pathlib.Path, s
         seg_labels is not None,
         f"camera (seed {args.seed}, {len(truth.objects)} objects)",
     )
-
-    meshes = None
-    if "reconstruction" in stages and observer.wait(["arm/meshes"], 180.0):
-        meshes = observer.latest["arm/meshes"]
-        summary["reconstruction"] = reconstruction_errors(meshes, truth)
-        plot_reconstruction_vs_truth(out / "reconstruction_vs_truth.png", meshes, truth, T_world_camera)
 
     if "planner" in stages and meshes is not None and meshes.objects:
         summary["task"] = run_task(node, observer, meshes, truth, args.task)

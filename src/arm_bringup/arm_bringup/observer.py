@@ -1,6 +1,7 @@
 """The demo's view of the graph: the latest message of every topic it reports on, and diagnostics."""
 
 import time
+from collections import OrderedDict
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -11,12 +12,16 @@ from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_ros.common import latched_qos, sensor_qos
 from arm_ros.conversions.images import depth_to_metres, image_to_numpy
 
+SEGMENTED_FRAMES_KEPT = 30
+
 
 class Observer:
-    """Collects the latest message of every topic the demo reports on."""
+    """Collects the latest message of every topic the demo reports on, and the last
+    SEGMENTED_FRAMES_KEPT segmented frames by stamp (to find the one a mesh array was built from)."""
 
     def __init__(self, node):
         self.node, self.latest, self.counts = node, {}, {}
+        self.segmented_frames: OrderedDict[tuple[int, int], SegmentedFrame] = OrderedDict()
         self.diagnostics: dict[str, dict] = {}
         qos = sensor_qos("reliable")
         for topic, kind, profile in [
@@ -37,6 +42,14 @@ class Observer:
     def _store(self, topic, msg):
         self.latest[topic] = msg
         self.counts[topic] = self.counts.get(topic, 0) + 1
+        if topic == "arm/segmented_frame":
+            self.segmented_frames[_stamp_key(msg.header.stamp)] = msg
+            while len(self.segmented_frames) > SEGMENTED_FRAMES_KEPT:
+                self.segmented_frames.popitem(last=False)
+
+    def segmented_frame_for(self, header):
+        """The kept segmented frame with header's stamp (the frame a mesh array was built from), or None."""
+        return self.segmented_frames.get(_stamp_key(header.stamp))
 
     def _diag(self, msg):
         for status in msg.status:
@@ -54,3 +67,7 @@ class Observer:
         rgb = image_to_numpy(self.latest["camera/color/image_raw"])
         depth = depth_to_metres(self.latest["camera/depth/image_raw"])
         return rgb, depth
+
+
+def _stamp_key(stamp) -> tuple[int, int]:
+    return int(stamp.sec), int(stamp.nanosec)
