@@ -184,12 +184,16 @@ def test_max_rate_spaces_reconstructions_and_keeps_the_newest_frame(sim, checkpo
         publisher.publish(frame_msg(frame))
         assert spin_until(executor, lambda: node.processed == 1, 120)
         first_start = node.last_start_s
-        for _ in range(3):  # arrive within the 1 s: the last one is reconstructed, the others dropped
+        for _ in range(3):  # arrive within the 1 s: the newest waiting one is reconstructed, the others dropped
             publisher.publish(frame_msg(frame))
             executor.spin_once(timeout_sec=0.01)
+        assert spin_until(executor, lambda: node.received == 4, 20)
         assert spin_until(executor, lambda: node.processed == 2, 120)
         assert node.last_start_s - first_start >= 0.99
-        assert node.received == 4 and node.dropped == 2
+        # On a loaded machine the last frame may arrive after the second reconstruction began: then
+        # it waits its turn instead of replacing a waiting one. Either way none is kept past its turn.
+        assert spin_until(executor, lambda: node.processed + node.dropped == 4, 120)
+        assert node.dropped >= 1
 
 
 def test_missing_checkpoint_is_a_configuration_error(ros_context, tmp_path):
