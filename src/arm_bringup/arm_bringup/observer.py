@@ -9,6 +9,7 @@ from geometry_msgs.msg import PoseArray, PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_planner.messages import time_ns
 from arm_ros.common import latched_qos, sensor_qos
 from arm_ros.conversions.images import depth_to_metres, image_to_numpy
 
@@ -21,7 +22,7 @@ class Observer:
 
     def __init__(self, node):
         self.node, self.latest, self.counts = node, {}, {}
-        self.segmented_frames: OrderedDict[tuple[int, int], SegmentedFrame] = OrderedDict()
+        self.segmented_frames: OrderedDict[int, SegmentedFrame] = OrderedDict()  # by stamp, ns
         self.diagnostics: dict[str, dict] = {}
         qos = sensor_qos("reliable")
         for topic, kind, profile in [
@@ -43,13 +44,13 @@ class Observer:
         self.latest[topic] = msg
         self.counts[topic] = self.counts.get(topic, 0) + 1
         if topic == "arm/segmented_frame":
-            self.segmented_frames[_stamp_key(msg.header.stamp)] = msg
+            self.segmented_frames[time_ns(msg.header.stamp)] = msg
             while len(self.segmented_frames) > SEGMENTED_FRAMES_KEPT:
                 self.segmented_frames.popitem(last=False)
 
     def segmented_frame_for(self, header):
         """The kept segmented frame with header's stamp (the frame a mesh array was built from), or None."""
-        return self.segmented_frames.get(_stamp_key(header.stamp))
+        return self.segmented_frames.get(time_ns(header.stamp))
 
     def _diag(self, msg):
         for status in msg.status:
@@ -67,7 +68,3 @@ class Observer:
         rgb = image_to_numpy(self.latest["camera/color/image_raw"])
         depth = depth_to_metres(self.latest["camera/depth/image_raw"])
         return rgb, depth
-
-
-def _stamp_key(stamp) -> tuple[int, int]:
-    return int(stamp.sec), int(stamp.nanosec)
