@@ -65,3 +65,25 @@ def _refine(labels: np.ndarray, rgb: np.ndarray, params: BorderParams) -> np.nda
     out = labels.copy()
     out[ys, xs] = np.where(is_object, labels[iy[ys, xs], ix[ys, xs]], 0)
     return out
+
+
+def grow_into_objectness(labels: np.ndarray, objectness: np.ndarray, threshold: float, reach_px: int) -> np.ndarray:
+    """uint16 labels with the unlabelled pixels whose object probability (HxW, the boundary
+    network's object channel at full resolution) exceeds threshold and that lie within reach_px of
+    an instance given to the nearest instance: flat bases in the table band and surfaces without
+    depth that geometry leaves out."""
+    ys, xs = np.nonzero(labels)
+    if len(ys) == 0 or reach_px <= 0:
+        return labels
+    m = reach_px + 1
+    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
+    crop = labels[box]
+    free = crop == 0
+    distance = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    grow = free & (objectness[box] > threshold) & (distance <= reach_px)
+    if not np.any(grow):
+        return labels
+    iy, ix = nearest_pixel(~free)
+    out = labels.copy()
+    out[box] = np.where(grow, crop[iy, ix], crop)
+    return out

@@ -1,15 +1,19 @@
-"""A small RGB-D network that marks the boundaries between objects (optional learned cue).
+"""A small RGB-D network with two outputs: where two objects meet, and what is object.
 
 Geometry cannot separate two objects that touch on one continuous surface, and colour cannot tell a
 printed label from a different object. The network looks at colour, depth, normals and height above
 the support together and predicts, per working-grid pixel, the probability that the pixel lies where
-two objects meet (an outline between objects). The clustering cuts fragments along its ridges and
-keeps fragments apart whose contact lies on it. Off by default (BoundaryParams.enabled): the shipped
-weights gain about 0.01 overlap F on the realistic benchmark and lose as much on the plain one
-(docs/experiments.md). Without the weights (or with torch missing) the segmentation
-runs on its geometric and colour cues alone.
+two objects meet (an outline between objects) and that it lies on an object at all.
 
-Inputs are computed on the working grid (320x240 for a 640x480 frame) by `boundary_features`.
+- Outline channel (BoundaryParams.enabled, off by default): the clustering cuts fragments along its
+  ridges and keeps fragments apart whose contact lies on it. With the shipped weights it gains on
+  the realistic benchmark and loses about 0.01 overlap F on the plain one (docs/experiments.md).
+- Object channel (BoundaryParams.fill_objects, on by default): unlabelled pixels it scores above
+  fill_threshold near an instance join the nearest instance: flat bases in the table band and
+  surfaces without depth, which geometry leaves out.
+
+Without the weights (or with torch missing) the segmentation runs on its geometric and colour cues
+alone. Inputs are computed on the working grid (320x240 for a 640x480 frame) by `boundary_features`.
 """
 
 from __future__ import annotations
@@ -110,13 +114,22 @@ def build_network(width: int = 8):
 
 @dataclass(frozen=True)
 class BoundaryParams:
-    """enabled: use the network when its weights load; threshold: outline probability above which a
-    ridge of it separates fragments (how merging uses it: ClusterParams.outline_*); checkpoint:
-    weights file ('' = the shipped one)."""
+    """enabled: use the network's outline channel when its weights load; threshold: outline
+    probability above which a ridge of it separates fragments (how merging uses it:
+    ClusterParams.outline_*); fill_objects: use its object channel, giving unlabelled pixels above
+    fill_threshold within fill_reach_px (full resolution) of an instance to the nearest instance;
+    checkpoint: weights file ('' = the shipped one)."""
 
     enabled: bool = False
     threshold: float = 0.5
+    fill_objects: bool = True
+    fill_threshold: float = 0.9
+    fill_reach_px: int = 20
     checkpoint: str = ""
+
+    @property
+    def network_used(self) -> bool:
+        return self.enabled or self.fill_objects
 
 
 class BoundaryPredictor:
@@ -156,7 +169,7 @@ def shared_predictor(params: BoundaryParams) -> BoundaryPredictor | None:
     """The predictor for params (loaded on first use, then shared), or None when disabled, or when
     the shipped weights (or torch) are missing. A checkpoint named in params that is missing raises
     FileNotFoundError; a weights file that does not load raises ValueError."""
-    if not params.enabled:
+    if not params.network_used:
         return None
     key = params.checkpoint or str(DEFAULT_CHECKPOINT)
     if key not in _PREDICTORS:

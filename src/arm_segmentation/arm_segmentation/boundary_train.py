@@ -3,10 +3,12 @@
 Random crops of the working-grid frames (mirrored at random, with brightness and contrast jitter)
 are fed to the network; the loss is the class-balanced binary cross-entropy of the outline target
 (object pixels within one working-grid pixel of another object, boundary_net.boundary_targets) plus that of
-the object mask. Every --save-every steps the model, the optimiser and the step go to <out>.state, so
-a stopped run resumes where it stopped; --minutes bounds the wall time of one call. At the end the
-test split is scored (outline precision, recall and F1 at the network's threshold) and <out> (the
-shipped weights), <out minus .pt>.md (the model card) and _curves.png are written.
+the object mask (its pixels within OBJECT_BAND_PX of an object weighted by --object-band-weight:
+that band is where the segmentation uses it). Every --save-every steps the model, the optimiser and
+the step go to <out>.state, so a stopped run resumes where it stopped; --minutes bounds the wall
+time of one call. At the end the test split is scored (outline precision, recall and F1 at the
+network's threshold; the object channel's precision and recall in the band) and <out> (the shipped
+weights), <out minus .pt>.md (the model card) and _curves.png are written.
 """
 
 from __future__ import annotations
@@ -22,6 +24,17 @@ from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
 from arm_segmentation.boundary_net import DEFAULT_CHECKPOINT, BoundaryParams, boundary_features, boundary_targets
+
+OBJECT_BAND_PX = 10  # working-grid pixels: BoundaryParams.fill_reach_px at full resolution
+
+
+def object_band(objects: np.ndarray, radius_px: int = OBJECT_BAND_PX) -> np.ndarray:
+    """HxW bool: pixels within radius_px of an object pixel (the object pixels included)."""
+    import cv2
+
+    size = 2 * radius_px + 1
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return cv2.dilate(objects.astype(np.uint8), disk) > 0
 
 
 def load_split(root, split: str) -> dict[str, np.ndarray]:
@@ -67,16 +80,19 @@ def make_batch(data: dict, rng: np.random.Generator, size: int, crop: tuple[int,
         xs.append(features)
         outlines.append(outline)
         objects.append(obj)
-    targets = np.stack([np.stack(outlines), np.stack(objects)], 1).astype(np.float32)
+    bands = [object_band(obj) for obj in objects]
+    targets = np.stack([np.stack(outlines), np.stack(objects), np.stack(bands)], 1).astype(np.float32)
     return torch.from_numpy(np.stack(xs)), torch.from_numpy(targets)
 
 
-def loss_fn(logits, targets, outline_weight: float):
+def loss_fn(logits, targets, outline_weight: float, object_band_weight: float = 1.0):
+    """targets (N, 3, H, W): outline, object, object band (object_band)."""
     import torch.nn.functional as F
 
     weight = 1.0 + (outline_weight - 1.0) * targets[:, :1]
     outline = F.binary_cross_entropy_with_logits(logits[:, :1], targets[:, :1], weight=weight)
-    obj = F.binary_cross_entropy_with_logits(logits[:, 1:], targets[:, 1:])
+    band_weight = 1.0 + (object_band_weight - 1.0) * targets[:, 2:3]
+    obj = F.binary_cross_entropy_with_logits(logits[:, 1:2], targets[:, 1:2], weight=band_weight)
     return outline + 0.5 * obj
 
 
@@ -87,6 +103,7 @@ def evaluate(model, data: dict, threshold: float) -> dict:
     model.eval()
     tp = fp = fn = 0
     correct = total = 0
+    band_tp = band_fp = band_fn = 0
     height, width = data["labels"].shape[1:]
     with torch.inference_mode():
         for index in range(len(data["labels"])):
@@ -98,6 +115,10 @@ def evaluate(model, data: dict, threshold: float) -> dict:
             fn += int(np.sum(~predicted & outline))
             correct += int(np.sum((probability[1] > 0.5) == obj))
             total += obj.size
+            seen = (probability[1] > BoundaryParams().fill_threshold) & object_band(obj)
+            band_tp += int(np.sum(seen & obj))
+            band_fp += int(np.sum(seen & ~obj))
+            band_fn += int(np.sum(~seen & obj))
     model.train()
     precision = tp / max(tp + fp, 1)
     recall = tp / max(tp + fn, 1)
@@ -106,6 +127,9 @@ def evaluate(model, data: dict, threshold: float) -> dict:
         "outline_recall": round(recall, 4),
         "outline_f1": round(2 * precision * recall / max(precision + recall, 1e-9), 4),
         "object_pixel_accuracy": round(correct / max(total, 1), 4),
+        # the object channel at the fill threshold, on pixels within OBJECT_BAND_PX of an object
+        "object_band_precision": round(band_tp / max(band_tp + band_fp, 1), 4),
+        "object_band_recall": round(band_tp / max(band_tp + band_fn, 1), 4),
         "test_frames": int(len(data["labels"])),
     }
 
@@ -148,7 +172,7 @@ def train(args) -> dict:
         if step % args.reload_every == 0 and _shard_count(args.data) != shard_count:
             shard_count, data = _shard_count(args.data), load_split(args.data, "train")  # seg_datagen still writing
         x, targets = make_batch(data, rng, args.batch, (args.crop_height, args.crop_width))
-        loss = loss_fn(model(x), targets, args.outline_weight)
+        loss = loss_fn(model(x), targets, args.outline_weight, args.object_band_weight)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
         optimiser.step()
@@ -169,7 +193,8 @@ def train(args) -> dict:
         result["test"] = evaluate(model, load_split(args.data, "test"), BoundaryParams().threshold)
         config = {"width": args.width, "steps": step, "batch": args.batch,
                   "crop": [args.crop_height, args.crop_width], "lr": args.lr,
-                  "outline_weight": args.outline_weight, "train_frames": int(len(data["labels"])),
+                  "outline_weight": args.outline_weight, "object_band_weight": args.object_band_weight,
+                  "train_frames": int(len(data["labels"])),
                   "init": pathlib.Path(args.init).name if args.init else "none"}  # fmt: skip
         payload = {"config": config, "model": model.state_dict(), "test": result["test"]}
         atomic_write(out, lambda tmp: torch.save(payload, tmp))
@@ -225,6 +250,12 @@ def main(argv=None) -> int:
     parser.add_argument("--width", type=int, default=8, help="channels at full working resolution")
     parser.add_argument("--lr", type=float, default=3e-3)
     parser.add_argument("--outline-weight", type=float, default=4.0, help="loss weight of outline pixels")
+    parser.add_argument(
+        "--object-band-weight",
+        type=float,
+        default=1.0,
+        help="loss weight of object-channel pixels within OBJECT_BAND_PX of an object",
+    )
     parser.add_argument("--save-every", type=int, default=100)
     parser.add_argument("--reload-every", type=int, default=400, help="steps between looks for new shards")
     parser.add_argument("--threads", type=int, default=2)

@@ -33,6 +33,15 @@ def upsample(image: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarr
     return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)[: shape[0], : shape[1]]
 
 
+def upsample_linear(image: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """Bilinear upsampling (float32) of an image subsampled with [::stride, ::stride]: full-resolution
+    pixel (y, x) reads the working grid at (y / stride, x / stride), edges replicated."""
+    to_working = np.array([[1.0 / stride, 0.0, 0.0], [0.0, 1.0 / stride, 0.0]])
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    image = np.asarray(image, dtype=np.float32)
+    return cv2.warpAffine(image, to_working, (shape[1], shape[0]), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+
+
 def instance_colours(labels: np.ndarray, chroma: np.ndarray) -> np.ndarray:
     """(K + 1, 3) mean chromaticity of each instance (row 0 unused)."""
     n = int(labels.max())

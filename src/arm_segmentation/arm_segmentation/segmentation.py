@@ -11,12 +11,12 @@ from scipy import ndimage
 
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
-from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
+from arm_segmentation.boundary import BorderParams, grow_into_objectness, nearest_pixel, refine_borders
 from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
-from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample
+from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample, upsample_linear
 from arm_segmentation.table_plane import (
     SupportLevel,
     TableParams,
@@ -54,6 +54,9 @@ class FineParams:
         names = ("step_px", "contact_radius_px", "small_fragment_px", "min_contact_px", "min_fragment_px")
         names += ("flood_iterations", "grow_radius_px")
         return replace(cluster, **{name: getattr(self, name) for name in names})
+
+
+NETWORK_MARGIN_PX = 24  # working-grid context the boundary network sees around the object pixels
 
 
 @dataclass(frozen=True)
@@ -142,11 +145,19 @@ def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, sup
     if support is None:
         support = support_heights(points_world, smoothed, levels, params.table)
     table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
-    if np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any():
-        lo = np.asarray(params.workspace_min_m, dtype=np.float32)
-        hi = np.asarray(params.workspace_max_m, dtype=np.float32)
-        objects &= np.all((points_world >= lo) & (points_world <= hi), axis=-1)
+    inside = in_workspace(points_world, params)
+    if inside is not None:
+        objects &= inside
     return _Stage(smoothed, points_camera, normals_camera, valid, points_world, area, support, table, objects, levels)
+
+
+def in_workspace(points_world: np.ndarray, params: SegmentationParams) -> np.ndarray | None:
+    """HxW bool: points (HxWx3, world frame, m) inside the workspace box; None when it is unbounded."""
+    if not (np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any()):
+        return None
+    lo = np.asarray(params.workspace_min_m, dtype=np.float32)
+    hi = np.asarray(params.workspace_max_m, dtype=np.float32)
+    return np.all((points_world >= lo) & (points_world <= hi), axis=-1)
 
 
 def missing_over_table(depth_m, K, T, levels, params: OccluderParams) -> np.ndarray:
@@ -229,13 +240,22 @@ def stage_features(rgb: np.ndarray, stage: _Stage) -> np.ndarray:
     return boundary_features(rgb, stage.smoothed, stage.normals_camera, stage.points_world[..., 2] - stage.support)
 
 
-def learned_outline(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.ndarray | None:
-    """HxW float32 working-grid probability that a pixel lies where two objects meet, or None without
-    the network (disabled, or no weights)."""
+def learned_maps(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.ndarray | None:
+    """(2, H, W) float32 working-grid probabilities from the boundary network: that a pixel lies
+    where two objects meet, and that it is on an object; None without the network (not used by
+    params, or no weights) or without object pixels. The network sees the object pixels' bounding
+    box grown by NETWORK_MARGIN_PX (its sides multiples of 8); outside it both are 0."""
     predictor = shared_predictor(params)
     if predictor is None or not np.any(stage.objects):
         return None
-    return predictor.predict(stage_features(rgb, stage))[0]
+    ys, xs = np.nonzero(stage.objects)
+    height, width = stage.objects.shape
+    y0, x0 = max(int(ys.min()) - NETWORK_MARGIN_PX, 0), max(int(xs.min()) - NETWORK_MARGIN_PX, 0)
+    y1 = min(y0 + -(-(int(ys.max()) + NETWORK_MARGIN_PX + 1 - y0) // 8) * 8, height)
+    x1 = min(x0 + -(-(int(xs.max()) + NETWORK_MARGIN_PX + 1 - x0) // 8) * 8, width)
+    maps = np.zeros((2, height, width), dtype=np.float32)
+    maps[:, y0:y1, x0:x1] = predictor.predict(stage_features(rgb, stage)[:, y0:y1, x0:x1])
+    return maps
 
 
 def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
@@ -262,7 +282,8 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         depth_full = np.where(exclude, np.float32(0.0), depth_full)
     stride = params.working_stride
     rgb, depth, K, stage = working_stage(rgb_full, depth_full, K_full, T, params)
-    outline = learned_outline(rgb, stage, params.boundary)
+    maps = learned_maps(rgb, stage, params.boundary)
+    outline = maps[0] if maps is not None and params.boundary.enabled else None
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
         K_crop = K_full.copy()
@@ -301,6 +322,10 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         occluders = upsample(occluders, stride, depth_full.shape)
         add = (labels == 0) & (occluders > 0)
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
+    if maps is not None and params.boundary.fill_objects:
+        inside = in_workspace(stage.points_world, params)
+        objectness = upsample_linear(maps[1] if inside is None else maps[1] * inside, stride, depth_full.shape)
+        labels = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
     return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)

@@ -90,16 +90,21 @@ class SegmentationNode(Node):
         )
         if len(workspace_min) != 3 or len(workspace_max) != 3:
             raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
+        defaults = BoundaryParams()
         boundary = BoundaryParams(
             enabled=declare(self, "boundary_network", False, "Use the learned object-outline cue (weights shipped)"),
             threshold=declare(self, "boundary_threshold", 0.5, "Outline probability separating objects", 0.05, 0.95),
+            fill_objects=declare(self, "object_fill", defaults.fill_objects, "Give object-like pixels to instances"),
+            fill_threshold=declare(
+                self, "object_fill_threshold", defaults.fill_threshold, "Object probability for object_fill", 0.5, 0.99
+            ),
             checkpoint=declare(self, "boundary_checkpoint", "", "Boundary network weights ('' = the shipped ones)"),
         )
         try:  # loaded now: a bad checkpoint fails at start with one clear line, not per frame
             predictor = shared_predictor(boundary)
         except (FileNotFoundError, ValueError) as error:
             raise ValueError(f"boundary_checkpoint: {error}") from error
-        threads = declare(self, "torch_threads", 1, "CPU threads of the outline network", 1, 64)
+        threads = declare(self, "torch_threads", 1, "CPU threads of the boundary network", 1, 64)
         if predictor is not None:
             # One thread: on a loaded machine a niced process's extra OpenMP threads wait on each other
             # (a 2-thread network took the frame from about 0.12 s to 0.7 s in the running graph).

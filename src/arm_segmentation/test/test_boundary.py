@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from arm_segmentation.boundary import BorderParams, nearest_pixel, refine_borders
+from arm_segmentation.boundary import BorderParams, grow_into_objectness, nearest_pixel, refine_borders
 
 
 def _scene():
@@ -44,3 +44,26 @@ def test_nearest_pixel_is_a_nearest_mask_pixel():
     near = exact <= 3
     assert np.allclose(found[near], exact[near])
     assert np.all(found <= exact + 1.0)
+
+
+def test_grow_into_objectness_gives_near_object_pixels_to_the_nearest_instance():
+    labels = np.zeros((60, 80), np.uint16)
+    labels[10:30, 10:30] = 1
+    labels[10:30, 50:70] = 2
+    objectness = np.zeros((60, 80), np.float32)
+    objectness[30:36, 10:30] = 0.95  # a flat base under instance 1, left out by geometry
+    objectness[30:36, 50:70] = 0.5  # below the threshold: stays background
+    objectness[50:60, 0:80] = 0.99  # object-like but beyond reach of every instance
+    grown = grow_into_objectness(labels, objectness, threshold=0.9, reach_px=10)
+    assert np.all(grown[30:36, 10:30] == 1)
+    assert not np.any(grown[30:36, 50:70]) and not np.any(grown[50:60])
+    assert np.array_equal(grown[labels > 0], labels[labels > 0])  # labelled pixels are never changed
+
+
+def test_grow_into_objectness_without_instances_or_reach_is_a_no_op():
+    objectness = np.ones((20, 20), np.float32)
+    empty = np.zeros((20, 20), np.uint16)
+    assert not np.any(grow_into_objectness(empty, objectness, 0.5, 10))
+    labels = empty.copy()
+    labels[5:10, 5:10] = 1
+    assert np.array_equal(grow_into_objectness(labels, objectness, 0.5, 0), labels)

@@ -49,8 +49,9 @@ def test_network_keeps_the_image_size_for_any_frame_size():
         assert model(torch.zeros(1, FEATURE_CHANNELS, 50, 70)).shape == (1, 2, 50, 70)
 
 
-def test_off_by_default_and_missing_weights(tmp_path, monkeypatch):
-    assert shared_predictor(BoundaryParams()) is None
+def test_used_for_the_fill_by_default_and_missing_weights(tmp_path, monkeypatch):
+    assert shared_predictor(BoundaryParams()) is not None  # the shipped weights, for the object fill
+    assert shared_predictor(BoundaryParams(enabled=False, fill_objects=False)) is None
     with pytest.raises(FileNotFoundError):
         shared_predictor(BoundaryParams(enabled=True, checkpoint=str(tmp_path / "none.pt")))
     (tmp_path / "garbage.pt").write_text("not weights")
@@ -71,7 +72,8 @@ def test_outline_cue_separates_flush_boxes_of_one_colour(monkeypatch):
 
     stride = off.working_stride
     outline = boundary_targets(truth[::stride, ::stride]).astype(np.float32)
-    monkeypatch.setattr(segmentation, "learned_outline", lambda *args: outline)
+    maps = np.stack([outline, np.zeros_like(outline)])
+    monkeypatch.setattr(segmentation, "learned_maps", lambda *args: maps)
     with_network = segmentation.SegmentationParams(boundary=BoundaryParams(enabled=True))
     labels = segmentation.segment(rgb, depth, K, camera, with_network)
     metrics = segmentation_metrics(labels, truth)
@@ -106,3 +108,26 @@ def test_shipped_weights_load_and_separate_differently_coloured_boxes():
     assert shared_predictor(params.boundary) is not None
     labels = segmentation.segment(rgb, depth, K, camera, params)
     assert segmentation_metrics(labels, truth)["overlap_f"] > 0.9
+
+
+def test_object_channel_gives_an_object_the_base_geometry_left_out(monkeypatch):
+    camera = look_at((-0.5, 0.0, 0.45), (0.0, 0.0, 0.0))
+    # a box with a table-coloured foot 1.5 cm high that loses its depth (a dark, matte base)
+    boxes = [Box((0.0, 0.0, 0.04), (0.04, 0.05, 0.04), rgb=(40, 60, 200))]
+    rgb, depth, truth, K = render(boxes, camera)
+    rows = np.nonzero(np.any(truth == 1, axis=1))[0]
+    foot = (truth == 1) & (np.arange(truth.shape[0])[:, None] > rows.max() - 0.2 * (rows.max() - rows.min()))
+    depth = np.where(foot, np.float32(0.0), depth)
+    rgb = np.where(foot[..., None], np.array([150, 130, 110], np.uint8), rgb)
+    off = segmentation.SegmentationParams(boundary=BoundaryParams(fill_objects=False))
+    without = segmentation.segment(rgb, depth, K, camera, off)
+    assert np.mean(without[foot] > 0) < 0.5  # geometry and colour leave most of the foot out
+
+    stride = off.working_stride
+    objectness = (truth[::stride, ::stride] > 0).astype(np.float32)
+    maps = np.stack([np.zeros_like(objectness), objectness])
+    monkeypatch.setattr(segmentation, "learned_maps", lambda *args: maps)
+    filled = segmentation.segment(rgb, depth, K, camera, segmentation.SegmentationParams())
+    assert np.mean(filled[foot] > 0) > 0.9 and np.all(filled[foot & (filled > 0)] == filled[truth == 1].max())
+    assert segmentation_metrics(filled, truth)["overlap_f"] > segmentation_metrics(without, truth)["overlap_f"]
+    assert np.mean(filled[truth == 0] > 0) < 0.01  # the table around it stays table
