@@ -25,5 +25,6 @@ setup(
             "bench_manip = arm_benchmarks.bench_manip:main",
             "bench_robustness = arm_benchmarks.bench_robustness:main",
             "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
+            "bench_pushability = arm_benchmarks.pushability:main",
     ]},
 )
