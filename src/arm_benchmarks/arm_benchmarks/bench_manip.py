@@ -46,7 +46,7 @@ from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import task_scene
-from arm_sim.world import SimWorld
+from arm_sim.world import SLIDING_FRICTION, SimWorld
 
 GOALS = {
     TASK_GRASP: (0.0, 0.0, 0.0),
@@ -252,6 +252,12 @@ def main(argv=None) -> int:
         help="push: the hand's contact height above the object's bottom, m",
     )
     parser.add_argument(
+        "--friction",
+        type=float,
+        default=SLIDING_FRICTION,
+        help="object-table sliding friction of the world the plans run in and of the twin",
+    )
+    parser.add_argument(
         "--node-twin",
         action="store_true",
         help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
@@ -281,6 +287,8 @@ def main(argv=None) -> int:
         parser.error(f"{error}, or {GROUND_TRUTH}")
     if args.num_paths < 2:
         parser.error("--num-paths must be >= 2")
+    if not np.isfinite(args.friction) or args.friction <= 0:
+        parser.error("--friction must be a positive number")
 
     torch.set_num_threads(2)
     out = pathlib.Path(args.out)
@@ -302,6 +310,7 @@ def main(argv=None) -> int:
     config.mppi.horizon = args.horizon
     config.push_hand_speed_m_s = args.push_hand_speed
     config.push_contact_height_m = args.push_contact_height
+    config.object_friction = args.friction
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
     config.sleep_tolerance = args.sleep_tolerance
@@ -342,6 +351,7 @@ def main(argv=None) -> int:
             ("horizon", args.horizon, MppiConfig.horizon),
             ("push_hand_speed_m_s", args.push_hand_speed, PlannerConfig.push_hand_speed_m_s),
             ("push_contact_height_m", args.push_contact_height, PlannerConfig.push_contact_height_m),
+            ("friction", args.friction, SLIDING_FRICTION),
         )
         if value != default
     }
@@ -362,6 +372,7 @@ def main(argv=None) -> int:
                 scene, target_index, frame, target_name = build_scene(
                     episode, BINS, target_pool, distractor_pool, args.target_scale, domain=args.domain
                 )
+                scene.friction = args.friction  # the table the plans are executed on (built and viewed at rest)
                 base |= {
                     "target": target_name,
                     "visible_fraction": float(frame.visible_fraction[target_index]),

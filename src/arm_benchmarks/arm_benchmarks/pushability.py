@@ -33,11 +33,11 @@ from arm_planner.planner import PlannerConfig
 from arm_planner.rewards import TASK_PUSH
 from arm_sim.objects import object_pool
 from arm_sim.scenes import random_rotation
-from arm_sim.world import OBJECT_FRICTION
+from arm_sim.world import SLIDING_FRICTION
 
 BASE_BAND_M = 0.001
 CONTACT_HEIGHTS_M = (0.006, 0.012, 0.018)
-FRICTIONS = (0.3, 0.5, OBJECT_FRICTION[0])
+FRICTIONS = (0.3, 0.5, SLIDING_FRICTION)
 
 
 def centre_of_mass(model) -> np.ndarray:
@@ -119,7 +119,7 @@ def measure(samples: int, seed: int, objects: str | None, measured=()) -> dict:
     recorded = measured_push_success(measured)
     for category in sorted({r["category"] for r in rows}):
         chosen = [r for r in rows if r["category"] == category]
-        h_star = np.array([r["h_star_m"][f"{OBJECT_FRICTION[0]:g}"] for r in chosen])
+        h_star = np.array([r["h_star_m"][f"{SLIDING_FRICTION:g}"] for r in chosen])
         by_category[category] = {
             "n": len(chosen),
             "h_star_m_median": median(h_star),
@@ -134,7 +134,7 @@ def measure(samples: int, seed: int, objects: str | None, measured=()) -> dict:
         "seed": seed,
         "objects": objects or "procedural held-out categories",
         "push_direction_xy": direction.tolist(),
-        "simulator_friction": OBJECT_FRICTION[0],
+        "simulator_friction": SLIDING_FRICTION,
         "planner_contact_height_m": planner_height,
         "pushable_share": shares,
         "by_category": by_category,

@@ -89,6 +89,9 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         0.0,
         2.0,
     )
+    config.object_friction = declare(
+        node, "object_friction", PlannerConfig.object_friction, "Twin: object-table sliding friction", 0.05, 2.0
+    )
     timestep = declare(node, "twin_timestep_s", 0.01, "Twin physics step, s (divides control_dt_s)", 0.001, 0.02)
     return config, timestep
 

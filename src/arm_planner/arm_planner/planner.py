@@ -40,6 +40,7 @@ from arm_planner.rewards import (
 )
 from arm_planner.robot_spec import ResolvedRobot, RobotSpec
 from arm_planner.twin import OVERLAP_EXCLUDE_M
+from arm_sim.world import SLIDING_FRICTION
 
 DEFAULT_TOLERANCE_M = 0.025
 DEFAULT_TASK_STEPS = {"rearrange": 500, "push": 500}
@@ -119,6 +120,9 @@ class PlannerConfig:
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
+    # Object-table sliding friction the twin assumes: the table the robot works on (the simulator's
+    # by default; set it to the real table's).
+    object_friction: float = SLIDING_FRICTION
 
 
 @dataclass

@@ -113,7 +113,12 @@ class ManipulationSession:
         self.close()
         self.twin = None
         self.twin = Twin(
-            objects, self.table_height_m, self.twin_timestep_s, self.robot, self.config.twin_overlap_exclude_m
+            objects,
+            self.table_height_m,
+            self.twin_timestep_s,
+            self.robot,
+            self.config.twin_overlap_exclude_m,
+            self.config.object_friction,
         )
         self.planner = Planner(self.twin.model, self.robot, self.config)
         self.twin_builds += 1

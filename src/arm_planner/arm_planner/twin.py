@@ -25,7 +25,7 @@ from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSetti
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
-from arm_sim.world import object_body_ids, object_body_name, world_spec
+from arm_sim.world import SLIDING_FRICTION, object_body_ids, object_body_name, world_spec
 
 MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
@@ -159,7 +159,8 @@ def geometry_signature(objects: list[TwinObject], table_height_m: float) -> str:
 
 
 class Twin:
-    """A compiled twin model with a map from object id to its body, plus the robot spec."""
+    """A compiled twin model with a map from object id to its body, plus the robot spec.
+    friction: the object-table sliding friction coefficient the twin assumes."""
 
     def __init__(
         self,
@@ -168,9 +169,12 @@ class Twin:
         timestep_s: float = 0.01,
         robot: RobotSpec | None = None,
         overlap_exclude_m: float = OVERLAP_EXCLUDE_M,
+        friction: float = SLIDING_FRICTION,
     ):
         if not np.isfinite(table_height_m):
             raise TwinError("table height is not finite")
+        if not np.isfinite(friction) or friction <= 0.0:
+            raise TwinError(f"friction must be a positive number, got {friction}")
         self.robot = robot or panda_robot_spec()
         self.table_height_m = float(table_height_m)
         self.skipped: dict[int, str] = {}
@@ -188,7 +192,7 @@ class Twin:
             model = ObjectModel(f"recon_{obj.id}", "reconstructed", mesh, parts)
             placed.append(PlacedObject(model, 1.0, T, (0.6, 0.6, 0.6, 1.0)))
             self.objects.append(obj)
-        self.scene = Scene(objects=placed, table_height_m=self.table_height_m)
+        self.scene = Scene(objects=placed, table_height_m=self.table_height_m, friction=float(friction))
         try:
             spec = world_spec(self.scene, robot_arm=True, timestep_s=timestep_s, name="arm_twin")
             self.model = spec.compile()

@@ -101,3 +101,13 @@ def test_objects_overlapping_as_built_pass_through_each_other_and_touching_ones_
         mujoco.mj_step(twin.model, data)
     assert data.xpos[twin.model.body(names[4]).id][0] - start[0] > 0.01
     assert Twin(overlapping, 0.0, 0.01, overlap_exclude_m=0.02).overlapping == []
+
+
+def test_twin_uses_the_friction_it_is_given():
+    twin = Twin([_box_object(3, (0.0, 0.0, 0.04))], 0.0, 0.01, friction=0.4)
+    table = twin.model.geom("table").id
+    part = twin.model.body_geomadr[twin.model.body(twin.body_name(3)).id]
+    assert twin.model.geom_friction[table, 0] == pytest.approx(0.4)
+    assert twin.model.geom_friction[part, 0] == pytest.approx(0.4)
+    with pytest.raises(TwinError, match="friction"):
+        Twin([], 0.0, friction=-1.0)

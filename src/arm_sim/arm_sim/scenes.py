@@ -12,7 +12,7 @@ from arm_core.camera import look_at
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS, SceneAppearance, sample_appearance
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import ObjectModel, ObjectPool
-from arm_sim.world import FLOOR_DROP_M, OBJECT_DENSITY_KG_M3, SimWorld, object_body_name
+from arm_sim.world import FLOOR_DROP_M, OBJECT_DENSITY_KG_M3, SLIDING_FRICTION, SimWorld, object_body_name
 
 DROP_REGION_X = (-0.2, 0.3)  # drop centres stay clear of the robot base at x = -0.55
 DROP_REGION_Y = (-0.3, 0.3)
@@ -45,6 +45,7 @@ class Scene:
     table_half_extent_m: tuple = (0.7, 0.5)
     table_rgba: tuple = (0.55, 0.45, 0.35, 1.0)
     appearance: SceneAppearance | None = None  # None: the plain domain
+    friction: float = SLIDING_FRICTION  # object-table and object-object sliding friction coefficient
 
     @property
     def table_centre(self) -> np.ndarray:
@@ -58,7 +59,7 @@ class Scene:
             if k
         ]
         appearance = None if self.appearance is None else self.appearance.subset(keep)
-        return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance)
+        return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance, self.friction)
 
     def with_domain(self, domain: str, rng: np.random.Generator) -> "Scene":
         """This scene in a visual domain ("realistic": a look drawn from a child of rng, so the
@@ -71,7 +72,8 @@ class Scene:
             appearance = sample_appearance(
                 rng.spawn(1)[0], len(self.objects), self.table_height_m, self.table_half_extent_m, floor_z
             )
-        return Scene(self.objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance)
+        table = (self.table_height_m, self.table_half_extent_m, self.table_rgba)
+        return Scene(self.objects, *table, appearance, self.friction)
 
 
 def random_rotation(rng: np.random.Generator, upright_probability: float) -> np.ndarray:

@@ -13,7 +13,12 @@ from arm_sim.depth_noise import DepthNoise, SensorArtefacts, apply_depth_noise, 
 RENDER_CAMERA = "render_camera"
 ROBOT_BASE_XY = (-0.55, 0.0)
 OBJECT_DENSITY_KG_M3 = 600.0
-OBJECT_FRICTION = (0.9, 0.01, 0.001)
+# Sliding friction between objects and the table (and between objects); MuJoCo takes the larger of
+# two geoms' coefficients. 0.9 is high for household objects on a table (0.3-0.6 is typical): at
+# 0.9 most of the procedural push targets tip before they slide (bench_pushability).
+SLIDING_FRICTION = 0.9
+TORSIONAL_FRICTION_M, ROLLING_FRICTION_M = 0.01, 0.001
+OBJECT_FRICTION = (SLIDING_FRICTION, TORSIONAL_FRICTION_M, ROLLING_FRICTION_M)
 FLOOR_DROP_M = 0.75
 
 
@@ -42,6 +47,7 @@ def world_spec(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: s
     spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
     table_z = float(scene.table_height_m)
     hx, hy = scene.table_half_extent_m
+    friction = contact_friction(scene.friction)
     world = spec.worldbody
     world.add_light(pos=[0.3, -0.4, table_z + 2.0], dir=[-0.1, 0.2, -1.0], diffuse=[0.6, 0.6, 0.6])
     world.add_geom(
@@ -57,17 +63,25 @@ def world_spec(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: s
         size=[hx, hy, 0.025],
         pos=[0, 0, table_z - 0.025],
         rgba=list(scene.table_rgba),
-        friction=list(OBJECT_FRICTION),
+        friction=friction,
     )
     world.add_camera(name=RENDER_CAMERA, pos=[1.0, 0.0, table_z + 1.0], fovy=45.0)
     appearance = scene.appearance
     if appearance is not None:
         _add_surroundings(spec, appearance, scene.table_half_extent_m)
     for i, placed in enumerate(scene.objects):
-        _add_object(spec, i, placed, None if appearance is None else appearance.objects[i])
+        _add_object(spec, i, placed, None if appearance is None else appearance.objects[i], friction)
     if robot_arm:
         robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
     return spec
+
+
+def contact_friction(sliding: float) -> list[float]:
+    """MuJoCo friction of the table and object geoms for a sliding coefficient (> 0, finite)."""
+    sliding = float(sliding)
+    if not np.isfinite(sliding) or sliding <= 0.0:
+        raise ValueError(f"sliding friction must be a positive number, got {sliding}")
+    return [sliding, TORSIONAL_FRICTION_M, ROLLING_FRICTION_M]
 
 
 def _add_texture(spec: mujoco.MjSpec, name: str, image: np.ndarray, cube: bool) -> None:
@@ -119,7 +133,7 @@ def _add_surroundings(spec: mujoco.MjSpec, appearance: SceneAppearance, table_ha
         )
 
 
-def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None) -> None:
+def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None, friction=OBJECT_FRICTION) -> None:
     T = np.asarray(placed.T_world_object, dtype=np.float64)
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, T[:3, :3].reshape(9))
@@ -144,7 +158,7 @@ def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None) -> None:
             density=placed.density_kg_m3,
             rgba=list(placed.rgba) if look is None else [1.0, 1.0, 1.0, 1.0],
             material=material,
-            friction=list(OBJECT_FRICTION),
+            friction=list(friction),
             condim=4,
         )
 
@@ -278,7 +292,12 @@ class SimWorld:
         depth = apply_depth_noise(depth, self.K, rng, noise)
         if self.appearance is not None and noise.enabled:
             depth = apply_sensor_artefacts(
-                depth, rgb, self._geom_dark[geom], self._geom_shiny[geom], self.appearance.depth_shift_px, rng,
+                depth,
+                rgb,
+                self._geom_dark[geom],
+                self._geom_shiny[geom],
+                self.appearance.depth_shift_px,
+                rng,
                 self.artefacts,
             )
             rgb = apply_camera_response(rgb, sample_camera_response(rng), rng)

@@ -1,10 +1,12 @@
 import mujoco
 import numpy as np
+import pytest
+import trimesh
 
 from arm_core.camera import look_at
 from arm_sim import robot
 from arm_sim.depth_noise import DepthNoise
-from arm_sim.objects import make_object, object_pool
+from arm_sim.objects import ObjectModel, make_object, object_pool
 from arm_sim.scenes import (
     TASK_TARGET_XY,
     PlacedObject,
@@ -100,3 +102,23 @@ def test_an_occluder_that_hides_too_much_is_slid_sideways_into_the_visibility_bi
     assert slid is not None and 0.4 <= fraction < 0.6
     assert new_disc[0][1] > occluder_xy[1] and slid.objects[1].T_world_object[1, 3] == new_disc[0][1]
     assert abs(_visible_fraction(slid, 0, camera) - fraction) < 1e-9
+
+
+def test_scene_friction_decides_whether_a_pushed_box_slides():
+    box = trimesh.creation.box((0.06, 0.06, 0.04))
+    model = ObjectModel("box", "box", box, [box.copy()])
+    T = np.eye(4)
+    T[2, 3] = 0.02
+    moved = {}
+    for friction in (0.5, 0.9):
+        mj = build_world(Scene([PlacedObject(model, 1.0, T)], friction=friction), robot_arm=False)
+        data = mujoco.MjData(mj)
+        body = mj.body("object_0").id
+        weight = float(mj.body_subtreemass[body]) * 9.81
+        for _ in range(int(0.5 / mj.opt.timestep)):
+            data.xfrc_applied[body, 0] = 0.7 * weight  # pushed at its centre of mass: it cannot tip
+            mujoco.mj_step(mj, data)
+        moved[friction] = float(data.xpos[body, 0])
+    assert moved[0.5] > 0.05 and abs(moved[0.9]) < 0.005
+    with pytest.raises(ValueError, match="friction"):
+        build_world(Scene(friction=0.0), robot_arm=False)
