@@ -18,11 +18,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
-from builtin_interfaces.msg import Time
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from arm_ros.conversions.stamps import ns_to_time, time_ns
 
 STORAGE_PLUGINS = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 STORAGE_SUFFIXES = {".mcap": "mcap", ".db3": "sqlite3"}
@@ -270,22 +271,13 @@ def read_bag(path, topics: Iterable[str] | None = None) -> list[tuple[str, int, 
 
 
 # --- stamps (replay) ------------------------------------------------------------------------
-def time_to_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def ns_to_time(ns: int) -> Time:
-    ns = max(0, int(ns))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
 def header_stamp_ns(msg) -> int | None:
     """The stamp of msg.header (or of a rosgraph_msgs/Clock), nanoseconds; None without one."""
     header = getattr(msg, "header", None)
     if header is not None and hasattr(header, "stamp"):
-        return time_to_ns(header.stamp)
+        return time_ns(header.stamp)
     clock = getattr(msg, "clock", None)
-    return time_to_ns(clock) if clock is not None and hasattr(clock, "nanosec") else None
+    return time_ns(clock) if clock is not None and hasattr(clock, "nanosec") else None
 
 
 def shift_stamps(msg, offset_ns: int) -> None:

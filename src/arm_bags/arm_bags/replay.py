@@ -38,10 +38,10 @@ from arm_bags.bags import (
     LoopStamps,
     header_stamp_ns,
     message_class,
-    ns_to_time,
     shift_stamps,
 )
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, spin_until_shutdown
+from arm_ros.conversions.stamps import ns_to_time
 
 FRAME_TOPICS = [
     "camera/color/image_raw",

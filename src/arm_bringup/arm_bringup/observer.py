@@ -9,9 +9,9 @@ from geometry_msgs.msg import PoseArray, PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
-from arm_planner.messages import time_ns
 from arm_ros.common import latched_qos, sensor_qos
 from arm_ros.conversions.images import depth_to_metres, image_to_numpy
+from arm_ros.conversions.stamps import time_ns
 
 SEGMENTED_FRAMES_KEPT = 30
 

@@ -24,11 +24,6 @@ TASK_NAMES = {
 DEFAULT_MAX_OBJECT_SIZE_M = 1.0
 
 
-def time_ns(stamp) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds (exact: the key plan_node stores scenes by)."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
 def object_size_m(mesh: trimesh.Trimesh | None, parts: list[trimesh.Trimesh]) -> float:
     """Largest side of the axis-aligned box around an object's mesh and parts, m (object frame)."""
     vertices = [m.vertices for m in ([mesh] if mesh is not None else []) + parts if len(m.vertices)]

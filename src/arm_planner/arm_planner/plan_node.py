@@ -30,7 +30,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
-from arm_planner.messages import TASK_NAMES, joint_state_arrays, time_ns, trajectory_msg, twin_objects_from_msg
+from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
 from arm_planner.scenes import Scene, SceneHistory, follow_target
@@ -38,6 +38,7 @@ from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.streaming import TrajectoryStream
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
 from arm_ros.conversions import ConversionError
+from arm_ros.conversions.stamps import time_ns
 from arm_ros.executors import QueueAwareMultiThreadedExecutor
 
 

@@ -23,6 +23,7 @@ from arm_ros.conversions.meshes import (
     reconstructed_object_msg,
 )
 from arm_ros.conversions.poses import matrix_to_pose, pose_to_matrix
+from arm_ros.conversions.stamps import ns_to_time, time_ns
 
 
 def test_images_round_trip():
@@ -151,3 +152,10 @@ def test_reconstructed_objects_round_trip():
     msg.mesh.triangles[0].vertex_indices = [0, 1, 9]
     with pytest.raises(ConversionError, match="out of range"):
         reconstructed_object_from_msg(msg)
+
+
+def test_stamps_round_trip_exactly_through_nanoseconds():
+    ns = 1_732_000_000_123_456_789
+    stamp = ns_to_time(ns)
+    assert (stamp.sec, stamp.nanosec) == (1_732_000_000, 123_456_789) and time_ns(stamp) == ns
+    assert time_ns(ns_to_time(-5)) == 0

@@ -19,6 +19,7 @@ import json
 import pathlib
 import time
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -30,8 +31,6 @@ OBJECT_BAND_PX = 10  # working-grid pixels: BoundaryParams.fill_reach_px at full
 
 def object_band(objects: np.ndarray, radius_px: int = OBJECT_BAND_PX) -> np.ndarray:
     """HxW bool: pixels within radius_px of an object pixel (the object pixels included)."""
-    import cv2
-
     size = 2 * radius_px + 1
     disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     return cv2.dilate(objects.astype(np.uint8), disk) > 0

@@ -18,7 +18,6 @@ OBJECT_DENSITY_KG_M3 = 600.0
 # 0.9 most of the procedural push targets tip before they slide (bench_pushability).
 SLIDING_FRICTION = 0.9
 TORSIONAL_FRICTION_M, ROLLING_FRICTION_M = 0.01, 0.001
-OBJECT_FRICTION = (SLIDING_FRICTION, TORSIONAL_FRICTION_M, ROLLING_FRICTION_M)
 FLOOR_DROP_M = 0.75
 
 
@@ -70,7 +69,7 @@ def world_spec(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: s
     if appearance is not None:
         _add_surroundings(spec, appearance, scene.table_half_extent_m)
     for i, placed in enumerate(scene.objects):
-        _add_object(spec, i, placed, None if appearance is None else appearance.objects[i], friction)
+        _add_object(spec, i, placed, friction, None if appearance is None else appearance.objects[i])
     if robot_arm:
         robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
     return spec
@@ -133,7 +132,7 @@ def _add_surroundings(spec: mujoco.MjSpec, appearance: SceneAppearance, table_ha
         )
 
 
-def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None, friction=OBJECT_FRICTION) -> None:
+def _add_object(spec: mujoco.MjSpec, i: int, placed, friction: list[float], look=None) -> None:
     T = np.asarray(placed.T_world_object, dtype=np.float64)
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, T[:3, :3].reshape(9))
@@ -158,7 +157,7 @@ def _add_object(spec: mujoco.MjSpec, i: int, placed, look=None, friction=OBJECT_
             density=placed.density_kg_m3,
             rgba=list(placed.rgba) if look is None else [1.0, 1.0, 1.0, 1.0],
             material=material,
-            friction=list(friction),
+            friction=friction,
             condim=4,
         )
 
