@@ -218,6 +218,13 @@ def main(argv=None) -> int:
     parser.add_argument("--objects", default=None, help="folder of target meshes (.obj/.stl/.ply, metres)")
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    parser.add_argument(
+        "--only-tasks",
+        nargs="+",
+        default=None,
+        choices=list(TASKS),
+        help="run only these tasks' episodes of the --tasks design (same scenes as the full run)",
+    )
     labels = [bin_label(b) for b in BINS]
     parser.add_argument(
         "--bins", nargs="+", default=labels, choices=labels, metavar="BIN", help="visible-fraction bins to run"
@@ -250,6 +257,12 @@ def main(argv=None) -> int:
         type=float,
         default=PlannerConfig.push_contact_height_m,
         help="push: the hand's contact height above the object's bottom, m",
+    )
+    parser.add_argument(
+        "--push-cage",
+        action=argparse.BooleanOptionalAction,
+        default=PlannerConfig.push_cage,
+        help="push with the open fingers fore and aft of objects that fit between them (else one finger)",
     )
     parser.add_argument(
         "--friction",
@@ -303,6 +316,10 @@ def main(argv=None) -> int:
         targets = max(len(target_pool), 26 if args.objects is None else len(target_pool))
         n = 3 * targets * len(args.tasks) * len(args.bins)
     episodes = plan_episodes(n, args.tasks, [labels.index(b) for b in args.bins], args.seed)
+    run_tasks = args.tasks
+    if args.only_tasks:
+        run_tasks = [t for t in args.tasks if t in args.only_tasks]
+        episodes = [e for e in episodes if e.task in run_tasks]
     config = PlannerConfig()
     config.mppi.steps = args.steps
     config.mppi.nthread = args.nthread
@@ -310,6 +327,7 @@ def main(argv=None) -> int:
     config.mppi.horizon = args.horizon
     config.push_hand_speed_m_s = args.push_hand_speed
     config.push_contact_height_m = args.push_contact_height
+    config.push_cage = args.push_cage
     config.object_friction = args.friction
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
@@ -352,13 +370,15 @@ def main(argv=None) -> int:
             ("push_hand_speed_m_s", args.push_hand_speed, PlannerConfig.push_hand_speed_m_s),
             ("push_contact_height_m", args.push_contact_height, PlannerConfig.push_contact_height_m),
             ("friction", args.friction, SLIDING_FRICTION),
+            ("push_cage", args.push_cage, PlannerConfig.push_cage),
+            ("only_tasks", run_tasks, args.tasks),
         )
         if value != default
     }
     key = result_key(settings | {"objects": str(pathlib.Path(args.objects).resolve()) if args.objects else None})
     done = load_done(log, key)
     progress = tqdm(
-        total=n * len(args.methods),
+        total=len(episodes) * len(args.methods),
         desc="bench_manip",
         initial=sum(1 for e in episodes for m in args.methods if (e.index, m) in done),
     )
@@ -397,7 +417,7 @@ def main(argv=None) -> int:
                 progress.set_postfix(method=method, task=episode.task, ok=row["success"])
     progress.close()
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
-    summary = summarise(rows, args.methods, args.tasks, BINS, n)
+    summary = summarise(rows, args.methods, run_tasks, BINS, len(episodes))
     summary["settings"] = settings | {"run_key": key}
     (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)

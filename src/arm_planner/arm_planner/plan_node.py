@@ -90,6 +90,9 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         0.0,
         2.0,
     )
+    config.push_cage = declare(
+        node, "push_cage", PlannerConfig.push_cage, "Push: open fingers fore and aft of an object that fits"
+    )
     config.object_friction = declare(
         node, "object_friction", PlannerConfig.object_friction, "Twin: object-table sliding friction", 0.05, 2.0
     )

@@ -33,6 +33,7 @@ from arm_planner.rewards import (
     TASK_PUSH,
     TASK_REARRANGE,
     TASKS,
+    CagePushReward,
     GraspReward,
     PushReward,
     RewardWeights,
@@ -120,6 +121,9 @@ class PlannerConfig:
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
+    # Push with the open fingers fore and aft of the object (CagePushReward) when it fits between them
+    # and the robot's spec gives its finger geometry; otherwise, or when False, with one finger.
+    push_cage: bool = True
     # Object-table sliding friction the twin assumes: the table the robot works on (the simulator's
     # by default; set it to the real table's).
     object_friction: float = SLIDING_FRICTION
@@ -250,12 +254,25 @@ class Planner:
             velocity_adr = None
             if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
                 velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
-            reward = PushReward(
-                **common,
+            spec = self.robot.spec
+            push = dict(
+                common,
                 goal_displacement=displacement,
                 target_vel_adr=velocity_adr,
-                contact_height_m=self.config.push_contact_height_m,
+                friction=self.config.object_friction,
             )
+            cage = self.config.push_cage and CagePushReward.fits_cage(
+                geometry, displacement, spec.finger_gap_open_m, spec.fingertip_to_palm_m
+            )
+            if cage:
+                reward = CagePushReward(
+                    **push,
+                    cage_gap_m=spec.finger_gap_open_m,
+                    finger_length_m=spec.fingertip_to_palm_m,
+                    tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
+                )
+            else:
+                reward = PushReward(**push, contact_height_m=self.config.push_contact_height_m)
         else:
             raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
         if request.start_com_world is not None:
@@ -349,7 +366,7 @@ class Planner:
                 paths = path_budget.update(paths, t0 - iteration_start)
             iteration_start = t0
             state = get_state(model, data)
-            gripper = robot.spec.gripper_closed if reward.gripper_closed else robot.spec.gripper_open
+            gripper = reward.gripper_command(robot.spec.gripper_open, robot.spec.gripper_closed)
             fixed = {int(robot.gripper_actuator): gripper}
             jac = self.tcp_jacobian(data)
             speed_cap = None

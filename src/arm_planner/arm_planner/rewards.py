@@ -82,7 +82,8 @@ def _yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
     """Angle between the finger closing axis (hand y) and a horizontal axis, modulo pi."""
     fingers = rot[..., :2, 1]
     norm = np.linalg.norm(fingers, axis=-1) + 1e-9
-    return np.arccos(np.clip(np.abs(fingers @ axis_xy[:2]) / norm, 0.0, 1.0))
+    along = np.abs(np.sum(fingers * np.asarray(axis_xy)[..., :2], axis=-1))
+    return np.arccos(np.clip(along / norm, 0.0, 1.0))
 
 
 @dataclass
@@ -118,6 +119,10 @@ class TaskReward:
             commanded_qpos[..., self.arm_qpos_adr] = controls[..., self.arm_actuators]
             hands = [(1.0 - share, *hands[0][1:]), (share, *self.hand(commanded_qpos))]
         return target_pos, hands
+
+    def gripper_command(self, open_command: float, closed_command: float) -> float:
+        """The gripper actuator's target for the next step, from the robot's open and closed values."""
+        return closed_command if self.gripper_closed else open_command
 
     @staticmethod
     def blend(hands, score) -> np.ndarray:
@@ -367,3 +372,131 @@ class PushReward(TaskReward):
     def error(self, state: np.ndarray) -> float:
         _, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(self.goal - target_pos[0]))
+
+
+@dataclass
+class CagePushReward(PushReward):
+    """Push with the open fingers straddling the object fore and aft along the push (a cage).
+
+    The rear finger pushes low and the front one catches the object if it starts to tip, so the push
+    does not depend on where the hidden shape first meets a finger (a single finger pushing a
+    top-heavy object tips it unless friction x contact height < the base's reach ahead of the centre
+    of mass; `bench_pushability`). Used for objects that fit between the open fingers
+    (`fits_cage`); the hand comes down vertically over the middle of the object's extent along the
+    push, fingertips just above the table, and then moves with the object to the goal.
+    """
+
+    # The robot's open fingers: inner gap (m), fingertip to palm (m), TCP above the fingertips (m).
+    cage_gap_m: float = 0.082
+    finger_length_m: float = 0.055
+    tcp_above_fingertip_m: float = 0.007
+    tip_clearance_m: float = 0.010
+    palm_clearance_m: float = 0.005
+    # While pushing, the fingers close to the object's extent along the push plus this each side, and
+    # the hand aims this far forward of the cage's middle, so the rear finger presses on the object.
+    cage_margin_m: float = 0.003
+    press_m: float = 0.01
+    # Per radian between the finger closing axis and the push direction.
+    cage_yaw: float = 0.5
+    # The object may lean this far (rad) into the front finger unpenalised: pushed by the rear finger
+    # it leans until the front one holds it.
+    cage_tilt_rad: float = 0.3
+
+    def __post_init__(self):
+        g = self.geometry
+        self.start_com = g.com_world.copy()
+        self.goal = g.com_world + self.goal_displacement
+        direction = self._direction(g.com_world[None])[0]
+        along = (g.vertices_world[:, :2] - g.com_world[:2]) @ direction
+        self.extent_along_m = float(along.max() - along.min())
+        self.slack_m = 0.5 * (self.cage_gap_m - self.extent_along_m)
+        tip_z = max(g.bottom_z + self.tip_clearance_m, g.top_z + self.palm_clearance_m - self.finger_length_m)
+        cage = np.array([*(g.com_world[:2] + direction * 0.5 * (along.max() + along.min())), 0.0])
+        cage[2] = tip_z + self.tcp_above_fingertip_m
+        self.cage_offset = cage - g.com_world
+        # While the hand is further than the slack from the cage point, its fingertips stay this much
+        # above the object's top.
+        self._rise_m = g.top_z + self.tip_clearance_m - tip_z
+
+    @classmethod
+    def fits_cage(
+        cls,
+        geometry: TargetGeometry,
+        goal_displacement: np.ndarray,
+        cage_gap_m: float,
+        finger_length_m: float,
+        margin_m: float = 0.008,
+        max_tip_height_m: float = 0.03,
+    ) -> bool:
+        """Whether the object fits between open fingers cage_gap_m apart along the push, with margin_m
+        each side, and under the palm with the fingertips at most max_tip_height_m above its bottom."""
+        if cage_gap_m <= 0:
+            return False
+        direction = np.asarray(goal_displacement, dtype=np.float64)[:2]
+        direction = direction / (np.linalg.norm(direction) + 1e-9)
+        along = geometry.vertices_world[:, :2] @ direction
+        height = geometry.top_z - geometry.bottom_z
+        return float(np.ptp(along)) + 2 * margin_m <= cage_gap_m and height <= finger_length_m + max_tip_height_m
+
+    def cage_funnel_penalty(self, hand_pos: np.ndarray, cage: np.ndarray) -> np.ndarray:
+        """How far (m) the hand is below the height at which its fingertips clear the object's top,
+        while it is further than the cage's slack from the cage point horizontally."""
+        d_xy = np.linalg.norm(hand_pos[..., :2] - cage[..., :2], axis=-1)
+        margin = max(self.slack_m - 0.003, 0.002)
+        floor = cage[..., 2] + self._rise_m * np.clip((d_xy - margin) / 0.005, 0.0, 1.0)
+        return np.maximum(floor - hand_pos[..., 2], 0.0)
+
+    @property
+    def gripper_closed(self) -> bool:
+        return False
+
+    def gripper_command(self, open_command: float, closed_command: float) -> float:
+        """Open while approaching; while pushing, closed to the object's extent along the push plus
+        cage_margin_m each side (the inner gap changes by twice the command of one finger)."""
+        if self.state != "pushing":
+            return open_command
+        narrower_by = self.cage_gap_m - (self.extent_along_m + 2 * self.cage_margin_m)
+        command = open_command - np.sign(open_command - closed_command) * max(narrower_by, 0.0) / 2
+        return float(np.clip(command, min(open_command, closed_command), max(open_command, closed_command)))
+
+    def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        w = self.weights
+        target_pos, hands = self.rollout_poses(states, controls)
+        pushing = self.state == "pushing"
+        direction = self._direction(target_pos)
+        cage = target_pos + self.cage_offset
+        if pushing:
+            lead = self.cage_margin_m + self.press_m
+            cage = cage + np.concatenate([direction * lead, np.zeros(direction.shape[:-1] + (1,))], axis=-1)
+
+        def score(pos, rot):
+            value = (
+                -w.distance * np.linalg.norm(pos - cage, axis=-1)
+                - w.angle * _angle_down(rot)
+                - self.cage_yaw * _yaw_error(rot, direction)
+            )
+            scrape = np.maximum(self.geometry.table_height_m + self.clearance_m - pos[..., 2], 0.0)
+            value = value - w.height * scrape
+            return value if pushing else value - w.height * self.cage_funnel_penalty(pos, cage)
+
+        reward = self.blend(hands, score)
+        if pushing:
+            rest, speed = self.rest_xy(states, target_pos)
+            to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
+            tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
+            reward = reward - w.goal * self.push_goal_weight * to_go
+            braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)
+            reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
+            reward = reward - self.upright * np.maximum(tilt - self.cage_tilt_rad, 0.0)
+        return reward
+
+    def update(self, state: np.ndarray) -> str:
+        hand_pos, _, target_pos, _ = self.poses(state[None])
+        distance = float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
+        self.step_count += 1
+        if self.state == "approaching" and distance < self.engage_distance_m:
+            self.state = "pushing"
+        elif self.state == "pushing" and distance > self.disengage_distance_m:
+            self.state = "approaching"
+        self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
+        return self.state

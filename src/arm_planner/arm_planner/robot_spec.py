@@ -17,6 +17,9 @@ class RobotSpec:
     tcp_body / tcp_offset_m: the grasp point (between the fingertips) in that body's frame.
     trajectory_joints: joint names of the published JointTrajectory, one per actuator in
     `trajectory_actuators` order (the gripper included).
+    finger_gap_open_m / fingertip_to_palm_m / tcp_above_fingertip_m: the open fingers' inner gap, their
+    length below the palm and the TCP's height above their tips (metres); with a gap of 0 the planner
+    pushes with one finger only (no caging push).
     """
 
     arm_joints: tuple[str, ...]
@@ -28,6 +31,9 @@ class RobotSpec:
     max_joint_rate_rad_s: float = 1.5
     max_gripper_rate: float = 1.0
     trajectory_joint_names: tuple[str, ...] = ()
+    finger_gap_open_m: float = 0.0
+    fingertip_to_palm_m: float = 0.0
+    tcp_above_fingertip_m: float = 0.0
 
     def resolve(self, model: mujoco.MjModel) -> ResolvedRobot:
         return ResolvedRobot(model, self)

@@ -102,6 +102,9 @@ def panda_robot_spec() -> RobotSpec:
         max_joint_rate_rad_s=1.5,
         max_gripper_rate=0.1,
         trajectory_joint_names=tuple(sim_robot.JOINT_NAMES) + (sim_robot.FINGER_JOINT_NAMES[0],),
+        finger_gap_open_m=float(sim_robot.FINGER_GAP_OPEN_M),
+        fingertip_to_palm_m=float(sim_robot.FINGERTIP_TO_PALM_M),
+        tcp_above_fingertip_m=float(sim_robot.TCP_ABOVE_FINGERTIP_M),
     )
 
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from arm_planner.rewards import GraspReward, PushReward, RewardWeights, TargetGeometry
+from arm_planner.rewards import CagePushReward, GraspReward, PushReward, RewardWeights, TargetGeometry
 
 GOAL = np.array([0.05, -0.30, 0.0])
 
@@ -121,3 +121,59 @@ def test_grasp_height_is_the_centre_of_mass_within_the_fingers_reach():
     assert top_heavy.grasp_point[2] == pytest.approx(0.064 - top_heavy.grasp_min_depth_m), "fingers overlap it"
     flat = _grasp_on(com_z=0.01, top_z=0.02)
     assert flat.grasp_point[2] == pytest.approx(0.015), "fingertips clear of the table"
+
+
+def _cage_on(extents, com_z=None) -> CagePushReward:
+    x, y, z = extents
+    box = np.array([[i, j, k] for i in (-x / 2, x / 2) for j in (-y / 2, y / 2) for k in (0.0, z)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, z / 2 if com_z is None else com_z]), box, 0.0)
+    return CagePushReward(
+        hand=_poses_from(0),
+        target=_poses_from(3),
+        geometry=geometry,
+        qpos_offset=0,
+        nq=6,
+        goal_displacement=np.array([0.3, 0.0, 0.0]),
+    )
+
+
+def test_only_objects_that_fit_between_the_open_fingers_are_caged():
+    def fits(extents):
+        reward = _cage_on(extents)
+        return CagePushReward.fits_cage(reward.geometry, reward.goal_displacement, 0.082, 0.055)
+
+    assert fits((0.05, 0.12, 0.064)), "long across the push is fine: the fingers are fore and aft"
+    assert not fits((0.07, 0.03, 0.064)), "too long along the push for the open fingers and their margins"
+    assert not fits((0.04, 0.04, 0.12)), "the palm would meet the top with the fingertips this high"
+    geometry = _cage_on((0.04, 0.04, 0.06)).geometry
+    assert not CagePushReward.fits_cage(geometry, np.array([0.3, 0.0, 0.0]), 0.0, 0.0), "no finger geometry"
+
+
+def test_cage_comes_down_over_the_object_then_leads_with_the_rear_finger_pressing():
+    low = _cage_on((0.04, 0.03, 0.04))
+    tip_z = low.cage_offset[2] + low.geometry.com_world[2] - low.tcp_above_fingertip_m
+    assert tip_z == pytest.approx(low.tip_clearance_m), "fingertips just above the table"
+    tall = _cage_on((0.04, 0.03, 0.064))
+    tall_tip_z = tall.cage_offset[2] + tall.geometry.com_world[2] - tall.tcp_above_fingertip_m
+    assert tall_tip_z == pytest.approx(0.064 + tall.palm_clearance_m - tall.finger_length_m), "palm clears the top"
+    com = low.geometry.com_world
+    cage = com + low.cage_offset
+    beside = np.concatenate([cage + [-0.04, 0.0, 0.0], com])  # a finger width behind, at the cage's height
+    above = np.concatenate([cage + [-0.04, 0.0, 0.06], com])
+    scores = low(np.stack([beside, above]), np.zeros((2, 0)))
+    assert scores[1] > scores[0], "approaching, the fingertips stay above the top until over the object"
+    low.update(np.concatenate([cage, com]))
+    assert low.state == "pushing" and low.near_contact
+    centred = np.concatenate([cage, com])
+    leading = np.concatenate([cage + [low.cage_margin_m + low.press_m, 0.0, 0.0], com])
+    scores = low(np.stack([centred, leading]), np.zeros((2, 0)))
+    assert scores[1] > scores[0], "pushing, the hand leads so the rear finger presses on the object"
+
+
+def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_push():
+    reward = _cage_on((0.04, 0.03, 0.064))
+    assert reward.gripper_command(0.04, 0.0) == 0.04
+    reward.resume("pushing", 0)
+    command = reward.gripper_command(0.04, 0.0)
+    gap = reward.cage_gap_m - 2 * (0.04 - command)
+    assert gap == pytest.approx(0.04 + 2 * reward.cage_margin_m)

@@ -70,6 +70,17 @@ def test_valid_request_plans_a_trajectory_and_reuses_the_twin(session):
     assert session.twin_builds == builds
 
 
+def test_push_cages_an_object_that_fits_between_the_fingers_unless_switched_off(session):
+    assert _ask(session, task="push", displacement=(0.05, -0.3, 0.0)).planned
+    assert type(session.planner._last_reward).__name__ == "CagePushReward"
+    session.config.push_cage = False
+    try:
+        assert _ask(session, task="push", displacement=(0.05, -0.3, 0.0)).planned
+        assert type(session.planner._last_reward).__name__ == "PushReward"
+    finally:
+        session.config.push_cage = True
+
+
 def test_cheaper_twin_merges_other_objects_and_still_plans():
     box = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
     halves = [trimesh.creation.box(extents=(0.05, 0.05, 0.04)) for _ in range(2)]

@@ -7,9 +7,10 @@ from test_planner import _setup
 from arm_benchmarks.bench_manip import ground_truth_objects
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig, PlanRequest
+from arm_planner.rewards import CagePushReward
 from arm_planner.session import ManipulationSession
 from arm_planner.world_execution import run_in_world, tracked_pose
-from arm_sim.objects import ObjectModel
+from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import SimWorld
 
@@ -68,5 +69,28 @@ def test_closed_loop_grasp_runs_in_the_world_and_the_twin_tracks_it():
     twin = session.twin
     twin_z = session.planner._data.xipos[twin.model.body(twin.body_name(1)).id][2]
     assert abs(twin_z - world.data.xipos[world.object_ids[0]][2]) < 0.01, "twin and world agree on the lift"
+    session.close()
+    world.close()
+
+
+def test_a_top_heavy_t_is_pushed_caged_between_the_fingers_and_arrives_standing():
+    """A T-shape (its bar 4.2 cm up) pushed 30 cm: the fingers come down fore and aft of it, close to
+    its extent plus margins, and it arrives within the tolerance still standing."""
+    T = np.eye(4)
+    T[:3, 3] = (0.05, 0.0, 0.0)
+    scene = Scene([PlacedObject(make_object("t_shape", np.random.default_rng(1)), 0.8, T)])
+    session = ManipulationSession(PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0)), 0.01)
+    world = SimWorld(scene, robot_arm=True)
+    goal = (0.05, -0.3, 0.0)
+    run = run_in_world(session, world, ground_truth_objects(scene), 0.0, 0, "push", goal, 0.025, 5)
+    reward = session.planner._last_reward
+    assert isinstance(reward, CagePushReward)
+    assert run.success, (run.error_m, run.outcome.message)
+    up = world.data.xmat[world.object_ids[0]].reshape(3, 3)[2, 2]
+    assert np.degrees(np.arccos(up)) < 30.0, "standing, leaning at most on the front finger"
+    result = run.outcome.result
+    pushing = np.array(result.states[:-1]) == "pushing"  # the state each next step was planned in
+    opening = result.controls[1:, session.planner.robot.gripper_actuator]
+    assert pushing.any() and np.all(opening[pushing] < opening[~pushing].min()), "narrowed while pushing"
     session.close()
     world.close()

@@ -33,6 +33,17 @@ JOINT_LIMITS = np.array(
 JOINT_NAMES = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINT_NAMES = ("panda_finger_joint1", "panda_finger_joint2")
 GRIPPER_OPEN_M = 0.04  # per finger; the gripper's command is the opening of one finger
+# Hand geometry (hand frame, z along the approach, metres): palm box, finger boxes on slides.
+PALM_HALF_SIZE_M = (0.02, 0.1, 0.025)
+PALM_CENTRE_Z_M = 0.03
+FINGER_BASE_Z_M = 0.0584
+FINGER_HALF_SIZE_M = (0.01, 0.006, 0.026)
+FINGER_INSET_M = 0.007  # finger centre from the hand's axis, gripper closed
+FINGERTIP_Z_M = FINGER_BASE_Z_M + 2 * FINGER_HALF_SIZE_M[2]
+# Between the open fingers' inner faces, from fingertip to palm, TCP above the fingertips.
+FINGER_GAP_OPEN_M = 2 * (FINGER_INSET_M + GRIPPER_OPEN_M - FINGER_HALF_SIZE_M[1])
+FINGERTIP_TO_PALM_M = FINGERTIP_Z_M - (PALM_CENTRE_Z_M + PALM_HALF_SIZE_M[2])
+TCP_ABOVE_FINGERTIP_M = FINGERTIP_Z_M - TCP_OFFSET_M
 HOME_Q = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
 LINK_MASS_KG = (4.97, 0.65, 3.23, 3.59, 1.23, 1.67, 0.74)
 JOINT_KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
@@ -119,8 +130,8 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
     hand.gravcomp = 1.0
     hand.add_geom(
         type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[0.02, 0.1, 0.025],
-        pos=[0, 0, 0.03],
+        size=list(PALM_HALF_SIZE_M),
+        pos=[0, 0, PALM_CENTRE_Z_M],
         mass=0.73,
         rgba=rgba,
         contype=ROBOT_CONTYPE,
@@ -128,7 +139,7 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
     )
     hand.add_site(name=TCP_SITE, pos=[0, 0, TCP_OFFSET_M], size=[0.005, 0, 0])
     for k, sign in enumerate((1.0, -1.0)):
-        finger = hand.add_body(name=f"panda_finger{k + 1}", pos=[0, 0, 0.0584])
+        finger = hand.add_body(name=f"panda_finger{k + 1}", pos=[0, 0, FINGER_BASE_Z_M])
         finger.gravcomp = 1.0
         finger.add_joint(
             name=FINGER_JOINT_NAMES[k],
@@ -140,8 +151,8 @@ def add_panda(spec: mujoco.MjSpec, base_pos, base_yaw: float = 0.0, rgba=(0.92, 
         )
         finger.add_geom(
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.01, 0.006, 0.026],
-            pos=[0, sign * 0.007, 0.026],
+            size=list(FINGER_HALF_SIZE_M),
+            pos=[0, sign * FINGER_INSET_M, FINGER_HALF_SIZE_M[2]],
             mass=0.02,
             rgba=[0.2, 0.2, 0.2, 1],
             friction=[1.5, 0.02, 0.002],
