@@ -351,16 +351,26 @@ class PushReward(TaskReward):
 
         reward = self.blend(hands, score)
         if pushing:
-            tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
-            reward = reward - w.goal * self.push_goal_weight * to_go
-            braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)  # the speed the hand can still stop from
-            reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
-            reward = reward - self.upright * tilt
+            reward = self._with_pushing_terms(reward, to_go, speed)
         return reward
 
-    def update(self, state: np.ndarray) -> str:
+    def _with_pushing_terms(self, reward: np.ndarray, to_go: np.ndarray, speed: np.ndarray, free_tilt_rad=0.0):
+        """reward less, while pushing: the rest point's distance to the goal, object speed the hand could
+        not stop from, and the object's tilt beyond free_tilt_rad."""
+        w = self.weights
+        tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
+        reward = reward - w.goal * self.push_goal_weight * to_go
+        braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)  # the speed the hand can still stop from
+        reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
+        return reward - self.upright * np.maximum(tilt - free_tilt_rad, 0.0)
+
+    def _engage_distance(self, state: np.ndarray) -> float:
+        """The hand's distance (m) from where it engages the object, at an executed state."""
         hand_pos, _, target_pos, target_rot = self.poses(state[None])
-        distance = float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
+        return float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
+
+    def update(self, state: np.ndarray) -> str:
+        distance = self._engage_distance(state)
         self.step_count += 1
         if self.state == "approaching" and distance < self.engage_distance_m:
             self.state = "pushing"
@@ -483,20 +493,9 @@ class CagePushReward(PushReward):
         if pushing:
             rest, speed = self.rest_xy(states, target_pos)
             to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
-            tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
-            reward = reward - w.goal * self.push_goal_weight * to_go
-            braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)
-            reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
-            reward = reward - self.upright * np.maximum(tilt - self.cage_tilt_rad, 0.0)
+            reward = self._with_pushing_terms(reward, to_go, speed, self.cage_tilt_rad)
         return reward
 
-    def update(self, state: np.ndarray) -> str:
+    def _engage_distance(self, state: np.ndarray) -> float:
         hand_pos, _, target_pos, _ = self.poses(state[None])
-        distance = float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
-        self.step_count += 1
-        if self.state == "approaching" and distance < self.engage_distance_m:
-            self.state = "pushing"
-        elif self.state == "pushing" and distance > self.disengage_distance_m:
-            self.state = "approaching"
-        self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
-        return self.state
+        return float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
