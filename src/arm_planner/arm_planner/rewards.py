@@ -384,6 +384,11 @@ class PushReward(TaskReward):
         return float(np.linalg.norm(self.goal - target_pos[0]))
 
 
+def _offsets_along(geometry: TargetGeometry, direction_xy: np.ndarray) -> np.ndarray:
+    """Each vertex's offset from the centre of mass along a horizontal unit direction (m)."""
+    return (geometry.vertices_world[:, :2] - geometry.com_world[:2]) @ direction_xy
+
+
 @dataclass
 class CagePushReward(PushReward):
     """Push with the open fingers straddling the object fore and aft along the push (a cage).
@@ -417,7 +422,7 @@ class CagePushReward(PushReward):
         self.start_com = g.com_world.copy()
         self.goal = g.com_world + self.goal_displacement
         direction = self._direction(g.com_world[None])[0]
-        along = (g.vertices_world[:, :2] - g.com_world[:2]) @ direction
+        along = _offsets_along(g, direction)
         self.extent_along_m = float(along.max() - along.min())
         self.slack_m = 0.5 * (self.cage_gap_m - self.extent_along_m)
         tip_z = max(g.bottom_z + self.tip_clearance_m, g.top_z + self.palm_clearance_m - self.finger_length_m)
@@ -443,8 +448,7 @@ class CagePushReward(PushReward):
         if cage_gap_m <= 0:
             return False
         direction = np.asarray(goal_displacement, dtype=np.float64)[:2]
-        direction = direction / (np.linalg.norm(direction) + 1e-9)
-        along = geometry.vertices_world[:, :2] @ direction
+        along = _offsets_along(geometry, direction / (np.linalg.norm(direction) + 1e-9))
         height = geometry.top_z - geometry.bottom_z
         return float(np.ptp(along)) + 2 * margin_m <= cage_gap_m and height <= finger_length_m + max_tip_height_m
 
