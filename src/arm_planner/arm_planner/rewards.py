@@ -233,11 +233,12 @@ class GraspReward(TaskReward):
             # drags it away (and tips it) before the grip forms.
             grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
         if self.state == "grasped":
-            # The hand stays pointing down while it holds the object: tilted, it swings the object out
-            # of the fingers' plane and drops it.
+            # Rearrange: the hand stays pointing down while it carries the object (tilted, it swings the
+            # object out of the fingers and drops it). A grasp only lifts: no term, as in the paper.
+            upright = w.angle if self.carry_height_m > 0 else 0.0
             reach = self.blend(
                 hands,
-                lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1) - w.angle * _angle_down(rot),
+                lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1) - upright * _angle_down(rot),
             )
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
