@@ -90,6 +90,14 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         0.0,
         2.0,
     )
+    config.carry_hand_speed_m_s = declare(
+        node,
+        "carry_hand_speed_m_s",
+        PlannerConfig.carry_hand_speed_m_s,
+        "Rearrange: the hand's top speed while it holds the object, m/s (0: no cap)",
+        0.0,
+        2.0,
+    )
     config.push_cage = declare(
         node, "push_cage", PlannerConfig.push_cage, "Push: open fingers fore and aft of an object that fits"
     )

@@ -118,6 +118,9 @@ class PlannerConfig:
     # objects at up to 0.75 m/s and they tipped over; 0.2: push-only bench_manip, ground truth 19 of 42
     # against 17, arm 17 of 38 against 13 (docs/experiments.md). 0.1 stalled at the first contact.
     push_hand_speed_m_s: float = 0.2
+    # Rearrange: the hand's top speed (m/s) while it holds the object, as a cap on every sampled path
+    # (0: no cap). Faster, the object swings about the fingers' closing axis and drops.
+    carry_hand_speed_m_s: float = 0.2
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
@@ -372,6 +375,8 @@ class Planner:
             speed_cap = None
             if cfg.push_hand_speed_m_s > 0 and request.task == TASK_PUSH and reward.near_contact:
                 speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cfg.push_hand_speed_m_s)
+            if cfg.carry_hand_speed_m_s > 0 and request.task == TASK_REARRANGE and reward.state == "grasped":
+                speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cfg.carry_hand_speed_m_s)
             result = self.mppi.step(
                 state, ctrl, reward, self.noise_basis(data, jac), fixed, num_paths=paths, rate_filter=speed_cap
             )

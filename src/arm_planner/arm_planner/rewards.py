@@ -36,6 +36,8 @@ class TargetGeometry:
     vertices_world: np.ndarray
     table_height_m: float
     R_world_target: np.ndarray = field(default_factory=lambda: np.eye(3))
+    # Vertices of the other objects in the twin at planning start, world frame (metres).
+    obstacle_vertices_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def vertices_in_target(self) -> np.ndarray:
         """Vertices relative to the centre of mass, in the target body's frame (metres)."""
@@ -48,6 +50,20 @@ class TargetGeometry:
     @property
     def bottom_z(self) -> float:
         return float(self.vertices_world[:, 2].min())
+
+    def highest_obstacle_along(self, goal_xy: np.ndarray, margin_m: float) -> float:
+        """Top (world z, m) of the other objects within the target's horizontal radius + margin_m of
+        the straight path from its centre to goal_xy; the table height when none is."""
+        obstacles = self.obstacle_vertices_world
+        if len(obstacles) == 0:
+            return self.table_height_m
+        start = self.com_world[:2]
+        path = np.asarray(goal_xy, dtype=np.float64)[:2] - start
+        t = np.clip((obstacles[:, :2] - start) @ path / max(float(path @ path), 1e-12), 0.0, 1.0)
+        off_path = np.linalg.norm(obstacles[:, :2] - (start + t[:, None] * path), axis=1)
+        radius = float(np.linalg.norm(self.vertices_world[:, :2] - start, axis=1).max())
+        near = off_path <= radius + margin_m
+        return float(obstacles[near, 2].max()) if near.any() else self.table_height_m
 
     def minor_axis_xy(self) -> np.ndarray:
         """Unit horizontal direction of the object's smallest horizontal extent (grasp closing axis)."""
@@ -76,6 +92,11 @@ class RewardWeights:
 def _angle_down(rot: np.ndarray) -> np.ndarray:
     """Angle between the hand's approach axis (its z axis) and world -z, radians."""
     return np.arccos(np.clip(-rot[..., 2, 2], -1.0, 1.0))
+
+
+def _tilt_beyond(rot: np.ndarray, free_rad: float) -> np.ndarray:
+    """How far (radians) the hand's approach axis tilts from world -z beyond free_rad; 0 within it."""
+    return np.maximum(_angle_down(rot) - free_rad, 0.0)
 
 
 def _yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
@@ -152,11 +173,31 @@ class GraspReward(TaskReward):
     # above the table.
     grasp_min_depth_m: float = 0.015
     grasp_max_depth_m: float = 0.04
-    # Rearrange: carry the object this high while it is far from the goal, set it down on arrival.
+    # Rearrange: carry the object at least this high while it is far from the goal, set it down on
+    # arrival; higher where other objects stand along the way, so that its base clears their tops by
+    # `carry_clearance_m` (objects within its radius + `carry_corridor_margin_m` of the straight path),
+    # up to `max_carry_height_m`.
     carry_height_m: float = 0.0
+    carry_clearance_m: float = 0.015
+    carry_corridor_margin_m: float = 0.02
+    max_carry_height_m: float = 0.10
+    # Rearrange, once grasped, in three phases advanced on the executed state (`carry_phase`): lift
+    # straight up to within `lift_first_within_m` of the carry height (moved sideways low, the object's
+    # base drags on the table or meets the objects around it and pivots out of the fingers; after
+    # `lift_timeout_steps` it is carried anyway), carry to above the goal, and place straight down once
+    # within `place_within_m` of the goal horizontally (set down while moving, it tips over).
+    lift_first_within_m: float = 0.01
+    lift_timeout_steps: int = 100
+    place_within_m: float = 0.02
+    # Rearrange, while grasped: the hand's tilt from pointing down costs nothing up to this (radians);
+    # beyond it, the angle weight per radian (tilted 60-100 degrees, the object swings out of the
+    # fingers; penalised from 0, the planner gave up the goal near joint limits to stay upright).
+    carry_free_tilt_rad: float = float(np.radians(30.0))
+    carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
     _closing_hand_pos: np.ndarray | None = None
+    _grasped_since: int = 0
 
     def __post_init__(self):
         g = self.geometry
@@ -167,18 +208,22 @@ class GraspReward(TaskReward):
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
         self.grasp_offset = self.grasp_point - g.com_world
         self.closing_axis = self.geometry.minor_axis_xy()
+        if self.carry_height_m > 0:
+            top = g.highest_obstacle_along(self.goal, self.carry_corridor_margin_m)
+            needed = top + self.carry_clearance_m - g.bottom_z
+            self.carry_height_m = float(np.clip(needed, self.carry_height_m, self.max_carry_height_m))
 
     @property
     def gripper_closed(self) -> bool:
         return self.state != "ungrasped"
 
     def carry_goal(self, target_pos: np.ndarray) -> np.ndarray:
-        """The goal, raised by carry_height_m while the object is more than 5 cm from it horizontally."""
-        if self.carry_height_m <= 0:
-            return self.goal
-        d_xy = np.linalg.norm(self.goal[:2] - target_pos[..., :2], axis=-1)
-        lift = self.carry_height_m * np.clip(d_xy / 0.05, 0.0, 1.0)
-        return self.goal + np.stack([np.zeros_like(lift), np.zeros_like(lift), lift], axis=-1)
+        """Where the object should be: for a rearrange, while grasped, the start raised by
+        carry_height_m (lifting), then the goal raised by it (carrying), then the goal (placing)."""
+        point = self.goal
+        if self.carry_height_m > 0 and self.state == "grasped" and self.carry_phase != "place":
+            point = (self.start_com if self.carry_phase == "lift" else self.goal) + [0.0, 0.0, self.carry_height_m]
+        return np.broadcast_to(point, np.shape(target_pos))
 
     def resume(self, state: str, steps_in_state: int) -> None:
         """Continue a task already under way (re-planning): grasping for `steps_in_state` steps, or grasped."""
@@ -186,6 +231,7 @@ class GraspReward(TaskReward):
             raise ValueError(f"cannot resume a grasp in state {state!r}")
         self.state = state
         self._closing_since = self.step_count - int(steps_in_state)
+        self._grasped_since = self._closing_since
 
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
@@ -196,7 +242,14 @@ class GraspReward(TaskReward):
             # drags it away (and tips it) before the grip forms.
             grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
         if self.state == "grasped":
-            reach = self.blend(hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1))
+            # Rearrange: the hand stays within carry_free_tilt_rad of pointing down while it carries the
+            # object. A grasp only lifts: no term, as in the paper.
+            upright = w.angle if self.carry_height_m > 0 else 0.0
+            reach = self.blend(
+                hands,
+                lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
+                - upright * _tilt_beyond(rot, self.carry_free_tilt_rad),
+            )
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
         def score(pos, rot):
@@ -228,6 +281,15 @@ class GraspReward(TaskReward):
                 self._closing_hand_pos = hand_pos[0].copy()
             if self.step_count - self._closing_since >= self.close_steps:
                 self.state = "grasped"
+                self._grasped_since = self.step_count
+        elif self.carry_height_m > 0 and self.carry_phase != "place":
+            near_goal = np.linalg.norm(target_pos[0, :2] - self.goal[:2]) <= self.place_within_m
+            if near_goal:
+                self.carry_phase = "place"
+            elif self.carry_phase == "lift":
+                raised = target_pos[0, 2] - self.start_com[2] >= self.carry_height_m - self.lift_first_within_m
+                if raised or self.step_count - self._grasped_since >= self.lift_timeout_steps:
+                    self.carry_phase = "carry"
         return self.state
 
     def error(self, state: np.ndarray) -> float:

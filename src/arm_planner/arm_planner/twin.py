@@ -217,18 +217,32 @@ class Twin:
     def body_name(self, object_id: int) -> str:
         return self.body_names[object_id]
 
-    def target_geometry(self, object_id: int, T_world_object: np.ndarray | None = None) -> TargetGeometry:
-        """The target's vertices and centre of mass in the world, at T_world_object (default: as built)."""
-        i = list(self.body_names).index(object_id)
-        placed = self.scene.objects[i]
-        body = self.model.body(self.body_names[object_id])
-        T = placed.T_world_object if T_world_object is None else np.asarray(T_world_object, dtype=np.float64)
-        vertices = np.concatenate([p.vertices for p in placed.model.convex_parts])
+    def _vertices_world(self, i: int, T_world_object: np.ndarray) -> np.ndarray:
+        """Object i's convex parts' vertices (at most MAX_GEOMETRY_VERTICES) at T_world_object."""
+        vertices = np.concatenate([p.vertices for p in self.scene.objects[i].model.convex_parts])
         if len(vertices) > MAX_GEOMETRY_VERTICES:
             vertices = vertices[np.linspace(0, len(vertices) - 1, MAX_GEOMETRY_VERTICES).astype(int)]
-        vertices_world = vertices @ T[:3, :3].T + T[:3, 3]
-        com_world = T[:3, :3] @ body.ipos + T[:3, 3]
-        return TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
+        return vertices @ T_world_object[:3, :3].T + T_world_object[:3, 3]
+
+    def target_geometry(self, object_id: int, poses: dict[int, np.ndarray] | None = None) -> TargetGeometry:
+        """The target's vertices and centre of mass in the world and the other objects' vertices, with
+        objects at `poses` (object id -> T_world_object; objects not in it: as built)."""
+        poses = poses or {}
+        geometry = None
+        obstacles = []
+        for i, (other_id, placed) in enumerate(zip(self.body_names, self.scene.objects, strict=True)):
+            T = np.asarray(poses.get(other_id, placed.T_world_object), dtype=np.float64)
+            vertices_world = self._vertices_world(i, T)
+            if other_id != object_id:
+                obstacles.append(vertices_world)
+                continue
+            com_world = T[:3, :3] @ self.model.body(self.body_names[object_id]).ipos + T[:3, 3]
+            geometry = TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
+        if geometry is None:
+            raise KeyError(f"object {object_id} is not in the twin")
+        if obstacles:
+            geometry.obstacle_vertices_world = np.concatenate(obstacles)
+        return geometry
 
     def initial_state(
         self,

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from arm_planner.rewards import CagePushReward, GraspReward, PushReward, RewardWeights, TargetGeometry
+from arm_planner.rewards import CagePushReward, GraspReward, PushReward, RewardWeights, TargetGeometry, _tilt_beyond
 
 GOAL = np.array([0.05, -0.30, 0.0])
 
@@ -177,3 +177,77 @@ def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_p
     command = reward.gripper_command(0.04, 0.0)
     gap = reward.cage_gap_m - 2 * (0.04 - command)
     assert gap == pytest.approx(0.04 + 2 * reward.cage_margin_m)
+
+
+REARRANGE = np.array([0.20, 0.20, 0.0])
+_CUBE = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, 0.06)])
+
+
+def _rearrange(obstacles=None) -> GraspReward:
+    obstacles = np.zeros((0, 3)) if obstacles is None else obstacles
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), _CUBE, 0.0, obstacle_vertices_world=obstacles)
+    return GraspReward(
+        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=REARRANGE, carry_height_m=0.04
+    )
+
+
+def _column(x, y, height_m):
+    return np.array([[x + dx, y + dy, z] for dx in (-0.01, 0.01) for dy in (-0.01, 0.01) for z in (0.0, height_m)])
+
+
+def test_rearrange_carries_over_the_objects_on_its_way_and_no_higher_than_the_cap():
+    assert _rearrange().carry_height_m == pytest.approx(0.04), "nothing on the way: the configured height"
+    assert _rearrange(_column(0.1, 0.1, 0.03)).carry_height_m == pytest.approx(0.045), "clears a low object"
+    assert _rearrange(_column(0.1, 0.1, 0.07)).carry_height_m == pytest.approx(0.085)
+    assert _rearrange(_column(0.1, 0.1, 0.30)).carry_height_m == pytest.approx(0.10), "capped"
+    assert _rearrange(_column(0.2, -0.1, 0.30)).carry_height_m == pytest.approx(0.04), "off the path"
+
+
+def test_rearrange_lifts_straight_up_then_carries_then_places_straight_down():
+    reward = _rearrange()
+    reward.resume("grasped", 0)
+    where = {"target": reward.start_com.copy()}
+    reward.poses = lambda states: (where["target"][None], None, where["target"][None], None)
+    up = np.array([0.0, 0.0, reward.carry_height_m])
+
+    def step_to(position):
+        where["target"] = np.asarray(position, dtype=np.float64)
+        reward.update(np.zeros(1))
+        return reward.carry_goal(where["target"][None])[0]
+
+    np.testing.assert_allclose(step_to(reward.start_com + [0.02, 0.0, 0.0]), reward.start_com + up)
+    np.testing.assert_allclose(step_to(reward.start_com + [0.0, 0.0, 0.035]), reward.goal + up, err_msg="raised: carry")
+    np.testing.assert_allclose(step_to(reward.start_com + [0.1, 0.1, 0.01]), reward.goal + up, err_msg="carry stays up")
+    np.testing.assert_allclose(step_to(reward.goal + [0.015, 0.0, 0.04]), reward.goal, err_msg="above the goal: place")
+    np.testing.assert_allclose(step_to(reward.goal + [0.03, 0.0, 0.02]), reward.goal, err_msg="placing stays placing")
+
+
+def test_rearrange_that_cannot_lift_is_carried_after_the_timeout():
+    reward = _rearrange()
+    reward.resume("grasped", 0)
+    reward.poses = lambda states: (reward.start_com[None], None, reward.start_com[None], None)
+    for _ in range(reward.lift_timeout_steps):
+        reward.update(np.zeros(1))
+    assert reward.carry_phase == "carry"
+
+
+def test_a_grasp_has_no_carry_phases():
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), _CUBE, 0.0)
+    reward = GraspReward(hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0)
+    reward.resume("grasped", 0)
+    np.testing.assert_allclose(reward.carry_goal(reward.start_com[None])[0], reward.goal)
+
+
+def _hand_tilted(degrees: float) -> np.ndarray:
+    """A hand pointing down (approach axis world -z), then tilted about world x."""
+    a = np.radians(degrees)
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]])
+    return tilt @ np.diag([1.0, -1.0, -1.0])
+
+
+def test_carry_tilt_costs_nothing_within_the_free_band_and_grows_linearly_beyond():
+    free = np.radians(30.0)
+    assert _tilt_beyond(_hand_tilted(0.0), free) == pytest.approx(0.0, abs=1e-9)
+    assert _tilt_beyond(_hand_tilted(25.0), free) == pytest.approx(0.0, abs=1e-9)
+    assert _tilt_beyond(_hand_tilted(60.0), free) == pytest.approx(np.radians(30.0))
+    assert _tilt_beyond(_hand_tilted(90.0), free) == pytest.approx(np.radians(60.0))

@@ -22,6 +22,12 @@ def test_twin_maps_ids_to_bodies_and_targets():
     np.testing.assert_allclose(geometry.com_world, [0.1, 0.1, 0.04], atol=1e-9)
     assert geometry.top_z == pytest.approx(0.08)
     assert twin.model.opt.timestep == 0.01
+    # The other object is an obstacle, at the pose given (moved 0.3 m up here) or as built.
+    assert geometry.obstacle_vertices_world[:, :2].mean(axis=0) == pytest.approx([0.0, 0.0], abs=1e-9)
+    T_up = np.eye(4)
+    T_up[:3, 3] = (0.0, 0.0, 0.34)
+    moved = twin.target_geometry(5, {3: T_up})
+    assert moved.obstacle_vertices_world[:, 2].min() == pytest.approx(0.30)
 
 
 def test_degenerate_objects_are_skipped_with_a_reason():
