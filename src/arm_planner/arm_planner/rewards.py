@@ -208,10 +208,16 @@ class GraspReward(TaskReward):
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
         self.grasp_offset = self.grasp_point - g.com_world
         self.closing_axis = self.geometry.minor_axis_xy()
+        self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
-            top = g.highest_obstacle_along(self.goal, self.carry_corridor_margin_m)
-            needed = top + self.carry_clearance_m - g.bottom_z
-            self.carry_height_m = float(np.clip(needed, self.carry_height_m, self.max_carry_height_m))
+            self.carry_height_m = self._clearing_height(g.bottom_z)
+
+    def _clearing_height(self, start_bottom_z: float) -> float:
+        """Carry height (m above the start) whose base clears the objects between the target's centre
+        and the goal, for a target whose base was at start_bottom_z (world z, m) at the start."""
+        top = self.geometry.highest_obstacle_along(self.goal, self.carry_corridor_margin_m)
+        needed = top + self.carry_clearance_m - start_bottom_z
+        return float(np.clip(needed, self._min_carry_height_m, self.max_carry_height_m))
 
     @property
     def gripper_closed(self) -> bool:
@@ -232,6 +238,27 @@ class GraspReward(TaskReward):
         self.state = state
         self._closing_since = self.step_count - int(steps_in_state)
         self._grasped_since = self._closing_since
+        if self.carry_height_m > 0:
+            # The start and goal are the task's (set before this), the geometry is where the object is
+            # now: the carry height is measured from its base at the start, and a rearrange carried
+            # away from its start, or lifted, carries on rather than lifting again.
+            com = self.geometry.com_world
+            self.carry_height_m = self._clearing_height(self.geometry.bottom_z - (com[2] - self.start_com[2]))
+            if state == "grasped":
+                moved = np.linalg.norm(com[:2] - self.start_com[:2]) > self.lift_first_within_m
+                self._advance_carry_phase(com, lift_over=moved)
+
+    def _advance_carry_phase(self, com: np.ndarray, lift_over: bool) -> None:
+        """Lift -> carry once the object (centre of mass `com`, world m) is raised or `lift_over`;
+        -> place once it is within place_within_m of the goal horizontally."""
+        if self.carry_phase == "place":
+            return
+        if np.linalg.norm(com[:2] - self.goal[:2]) <= self.place_within_m:
+            self.carry_phase = "place"
+        elif self.carry_phase == "lift":
+            raised = com[2] - self.start_com[2] >= self.carry_height_m - self.lift_first_within_m
+            if raised or lift_over:
+                self.carry_phase = "carry"
 
     def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
         w = self.weights
@@ -247,8 +274,10 @@ class GraspReward(TaskReward):
             upright = w.angle if self.carry_height_m > 0 else 0.0
             reach = self.blend(
                 hands,
-                lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
-                - upright * _tilt_beyond(rot, self.carry_free_tilt_rad),
+                lambda pos, rot: (
+                    -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
+                    - upright * _tilt_beyond(rot, self.carry_free_tilt_rad)
+                ),
             )
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
@@ -282,14 +311,9 @@ class GraspReward(TaskReward):
             if self.step_count - self._closing_since >= self.close_steps:
                 self.state = "grasped"
                 self._grasped_since = self.step_count
-        elif self.carry_height_m > 0 and self.carry_phase != "place":
-            near_goal = np.linalg.norm(target_pos[0, :2] - self.goal[:2]) <= self.place_within_m
-            if near_goal:
-                self.carry_phase = "place"
-            elif self.carry_phase == "lift":
-                raised = target_pos[0, 2] - self.start_com[2] >= self.carry_height_m - self.lift_first_within_m
-                if raised or self.step_count - self._grasped_since >= self.lift_timeout_steps:
-                    self.carry_phase = "carry"
+        elif self.carry_height_m > 0:
+            timed_out = self.step_count - self._grasped_since >= self.lift_timeout_steps
+            self._advance_carry_phase(target_pos[0], lift_over=timed_out)
         return self.state
 
     def error(self, state: np.ndarray) -> float:

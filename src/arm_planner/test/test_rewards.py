@@ -251,3 +251,24 @@ def test_carry_tilt_costs_nothing_within_the_free_band_and_grows_linearly_beyond
     assert _tilt_beyond(_hand_tilted(25.0), free) == pytest.approx(0.0, abs=1e-9)
     assert _tilt_beyond(_hand_tilted(60.0), free) == pytest.approx(np.radians(30.0))
     assert _tilt_beyond(_hand_tilted(90.0), free) == pytest.approx(np.radians(60.0))
+
+
+def test_rearrange_replanned_mid_carry_carries_on_at_the_height_from_its_start():
+    start = np.array([0.0, 0.0, 0.03])
+    obstacle = _column(0.15, 0.15, 0.07)
+    first = _rearrange(obstacle)
+    # Re-planned with the object held 8.5 cm up and 5 cm along the way: the task's start and goal stay.
+    now = np.array([0.05, 0.05, 0.085])
+    geometry = TargetGeometry(start + now, _CUBE + now, 0.0, obstacle_vertices_world=obstacle)
+    reward = GraspReward(
+        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=REARRANGE, carry_height_m=0.04
+    )
+    reward.start_com, reward.goal = start.copy(), start + REARRANGE
+    reward.resume("grasped", 30)
+    assert reward.carry_height_m == pytest.approx(first.carry_height_m), "measured from the base at the start"
+    assert reward.carry_phase == "carry"
+    np.testing.assert_allclose(reward.carry_goal(now[None])[0], reward.goal + [0.0, 0.0, first.carry_height_m])
+    # Re-planned while still lifting, in place: it goes on lifting.
+    lifting = _rearrange(obstacle)
+    lifting.resume("grasped", 5)
+    assert lifting.carry_phase == "lift"
