@@ -22,5 +22,6 @@ setup(
             "segmentation_node = arm_segmentation.segmentation_node:main",
             "seg_datagen = arm_segmentation.boundary_data:main",
             "seg_train = arm_segmentation.boundary_train:main",
+            "seg_merge_train = arm_segmentation.merge_train:main",
     ]},
 )

@@ -2,14 +2,15 @@
 
 N seeded scenes (3-20 held-out objects each, settled by physics, camera pose sampled as in the
 paper's benchmark, depth noise on) are rendered at 640x480 and segmented by the default method
-(geometry and colour), by the same method with the learned outline cue (boundary_net), and by the
-classic baseline (RANSAC plane + DBSCAN). All are scored with the
+(geometry, colour and the learned merge classifier), by the same method with the learned outline cue
+(boundary_net), by it with the hand-made colour and smooth-surface merging instead of the classifier,
+and by the classic baseline (RANSAC plane + DBSCAN). All are scored with the
 UOIS metrics (overlap and boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12
 objects), and timed per frame.
 
 Rendered frames and per-scene scores are kept under OUT/cache/, so an interrupted run resumes where
 it stopped. Frames are keyed by the run key of the settings and the simulator's source, scores by the
-run key of the settings, the boundary network's weights and the source of the simulator, the
+run key of the settings, the boundary network's and merge classifier's weights and the source of the simulator, the
 segmentation and this package, so changed code or weights render and score anew (arm_core.run_key).
 Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
 """
@@ -32,6 +33,8 @@ from arm_core.run_key import run_key
 from arm_core.stats import mean, median, percentile
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.boundary_net import DEFAULT_CHECKPOINT, BoundaryParams
+from arm_segmentation.merge_model import DEFAULT_CHECKPOINT as MERGE_CHECKPOINT
+from arm_segmentation.merge_model import MergeParams
 from arm_segmentation.metrics import segmentation_metrics
 from arm_segmentation.segmentation import SegmentationParams, segment
 from arm_segmentation.visualization import colourise
@@ -42,9 +45,11 @@ from arm_sim.views import render_benchmark_view
 matplotlib.use("Agg")
 
 WITH_NETWORK = SegmentationParams(boundary=BoundaryParams(enabled=True))
+COLOUR_MERGE = SegmentationParams(merge=MergeParams(enabled=False))
 METHODS = {
     "arm_default": segment,
     "arm_outline_network": functools.partial(segment, params=WITH_NETWORK),
+    "arm_colour_merge": functools.partial(segment, params=COLOUR_MERGE),
     "baseline_ransac_dbscan": segment_baseline,
 }
 METRIC_KEYS = (
@@ -109,7 +114,7 @@ def frames_key(args) -> str:
 
 def scores_key(args) -> str:
     """Run key of the per-scene scores: settings, the simulator's, the segmentation's and this package's source."""
-    return run_key(frame_settings(args), checkpoints=[DEFAULT_CHECKPOINT], packages=SCORE_PACKAGES)
+    return run_key(frame_settings(args), checkpoints=[DEFAULT_CHECKPOINT, MERGE_CHECKPOINT], packages=SCORE_PACKAGES)
 
 
 def render_scene(index: int, args, pool):
@@ -178,7 +183,7 @@ def aggregate(rows: list[dict]) -> dict:
 
 
 def write_examples(path: pathlib.Path, frames: list, titles: list[str]) -> None:
-    columns = ["RGB", "ground truth", "arm_default", "arm_outline_network", "baseline_ransac_dbscan"]
+    columns = ["RGB", "ground truth", "arm_default", "arm_colour_merge", "baseline_ransac_dbscan"]
     fig, axes = plt.subplots(len(frames), len(columns), figsize=(4 * len(columns), 3.1 * len(frames)), squeeze=False)
     for row, (frame, title) in enumerate(zip(frames, titles, strict=True)):
         images = [frame["rgb"], colourise(frame["labels"])]
@@ -321,11 +326,12 @@ def main(argv=None) -> int:
     ]
     picks = list(dict.fromkeys(picks))
     frames = [load_or_render(i, args, pool_factory, frames_dir) for i in picks]
-    write_examples(
-        out / "examples.png",
-        frames,
-        [f"scene {i} ({int(f['n_objects'])} objects)" for i, f in zip(picks, frames, strict=True)],
-    )
+    if frames:  # --examples 0: no examples.png
+        write_examples(
+            out / "examples.png",
+            frames,
+            [f"scene {i} ({int(f['n_objects'])} objects)" for i, f in zip(picks, frames, strict=True)],
+        )
     write_metric_plot(out / "metrics.png", subsets)
     write_report(out / "report.md", summary, args)
     for subset, stats in subsets.items():

@@ -7,7 +7,8 @@
    chromaticities agree are one object (parts of one object meet at creases too). Regions merge
    most similar first (mutual nearest neighbours per round, means and contacts recomputed after
    each round), so a chain of small colour steps does not join objects of different colour.
-   Fragments too small to be an object join the neighbour they touch most.
+   Fragments too small to be an object join the neighbour they touch most. With the learned merge
+   classifier (merge_model), it decides which touching regions merge instead of their colour.
 3. Growing: instances extend into nearby pixels the depth sensor dropped or that lie in the table
    band (object bottoms, thin feet) when the pixel's colour matches the instance and not the table.
 """
@@ -220,14 +221,17 @@ def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
 
 
 def _agglomerate(
-    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, use_outline: bool = False
-) -> np.ndarray:
+    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, use_outline: bool = False,
+    scorer=None,
+) -> np.ndarray:  # fmt: skip
     """Region merging: each round joins the mutually most similar mergeable neighbours, then the
     merged regions' mean colours and contact counts are recomputed, so a chain of small colour
     steps does not join two objects of different colour. use_outline (counts carry the summed
     outline probability): regions whose contacts' mean probability exceeds params.outline_separate
     never merge, and those below params.outline_inside merge up to colour distance
-    params.outline_inside_chroma. Returns the region of each label 0..n."""
+    params.outline_inside_chroma. scorer (merge_model.LearnedMerge, started on labels): touching
+    regions merge when its probability exceeds its threshold, most probable first, instead of by
+    colour. Returns the region of each label 0..n."""
     flat = labels.ravel()
     frag_size = np.bincount(flat, minlength=n + 1).astype(np.float64)
     frag_sums = np.stack([np.bincount(flat, weights=chroma[..., k].ravel(), minlength=n + 1) for k in range(3)], 1)
@@ -251,24 +255,48 @@ def _agglomerate(
         small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
         limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
         ok = _should_merge(region_counts, params) & (distance <= limit)
+        if scorer is not None:
+            probability = scorer.probability(owner, region_pairs, region_counts)
+            ok = (region_counts[:, :3].sum(axis=1) >= params.min_contact_px) & (probability > scorer.threshold)
+            distance = 1.0 - probability
         if use_outline:
             mean_outline = contact_outline(region_counts)
-            touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
-            sure_inside = touching & (mean_outline < params.outline_inside)
-            sure_inside &= distance <= params.outline_inside_chroma
-            ok = (ok | sure_inside) & (mean_outline <= params.outline_separate)
-            distance = np.where(sure_inside, 0.0, distance)  # sure insides first
+            ok &= mean_outline <= params.outline_separate
+            if scorer is None:  # the classifier weighs the outline itself
+                touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
+                sure_inside = touching & (mean_outline < params.outline_inside)
+                sure_inside &= distance <= params.outline_inside_chroma
+                ok |= sure_inside & (mean_outline <= params.outline_separate)
+                distance = np.where(sure_inside, 0.0, distance)  # sure insides first
         if not np.any(ok):
             break
-        best = np.full(n + 1, np.inf)
-        np.minimum.at(best, ra[ok], distance[ok])
-        np.minimum.at(best, rb[ok], distance[ok])
-        mutual = ok & (distance <= best[ra]) & (distance <= best[rb])
+        if scorer is not None:
+            mutual = _mutual_best(ra, rb, distance, ok)
+        else:
+            best = np.full(n + 1, np.inf)
+            np.minimum.at(best, ra[ok], distance[ok])
+            np.minimum.at(best, rb[ok], distance[ok])
+            mutual = ok & (distance <= best[ra]) & (distance <= best[rb])
         component = _union(n, region_pairs[mutual])
         representative = np.full(component.max() + 1, n + 1)
         np.minimum.at(representative, component, np.arange(n + 1))
         owner = representative[component[owner]]
     return owner
+
+
+def _mutual_best(ra: np.ndarray, rb: np.ndarray, distance: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(P,) bool: ok pairs that are each other's single nearest (ties broken by pair order), so one
+    round never chains regions through a shared neighbour."""
+    candidates = np.nonzero(ok)[0]
+    candidates = candidates[np.argsort(distance[candidates], kind="stable")]
+    ends = np.concatenate([ra[candidates], rb[candidates]])
+    pair_of_end = np.concatenate([candidates, candidates])
+    order = np.argsort(np.concatenate([np.arange(len(candidates))] * 2), kind="stable")
+    regions, first = np.unique(ends[order], return_index=True)
+    best_pair = np.full(int(max(ra.max(), rb.max())) + 1, -1)
+    best_pair[regions] = pair_of_end[order][first]
+    index = np.arange(len(ra))
+    return ok & (best_pair[ra] == index) & (best_pair[rb] == index)
 
 
 def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, outline=None) -> np.ndarray:
@@ -300,7 +328,7 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
 
 def merge_fragments(
     labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None,
-    outline=None,
+    outline=None, scorer=None,
 ) -> np.ndarray:  # fmt: skip
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
 
@@ -308,16 +336,24 @@ def merge_fragments(
     (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
     merge first (merge_geometric). outline: HxW float, the boundary network's outline probability;
     fragments whose contacts lie mostly on an outline stay apart, those meeting where it is sure there
-    is none merge across moderate colour differences (_agglomerate)."""
+    is none merge across moderate colour differences (_agglomerate). scorer: a merge_model.LearnedMerge
+    that decides, after the smooth-surface rule, which touching regions merge instead of their colour
+    (its contacts carry its own outline probability and the smooth contacts)."""
     if n == 0:
         return labels
     if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
         labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params, outline)
         n = int(labels.max())
-    pairs, counts = fragment_contacts(labels, depth_m, params, outline=outline)
+    if scorer is not None:
+        contact_outline_map = outline if outline is not None else scorer.outline
+        pairs, counts = fragment_contacts(labels, depth_m, params, smooth, contact_outline_map)
+        scorer.start(labels, n)
+    else:
+        pairs, counts = fragment_contacts(labels, depth_m, params, outline=outline)
     if len(pairs) and params.use_colour:
-        if params.agglomerative:
-            component = _agglomerate(labels, n, pairs, counts, chroma, params, use_outline=outline is not None)
+        if params.agglomerative or scorer is not None:
+            use_outline = outline is not None
+            component = _agglomerate(labels, n, pairs, counts, chroma, params, use_outline=use_outline, scorer=scorer)
         else:
             means = _region_means(labels, n, chroma)
             colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
@@ -409,12 +445,14 @@ def cluster_instances(
     height_m: np.ndarray | None = None,
     outline: np.ndarray | None = None,
     outline_edges: np.ndarray | None = None,
+    scorer=None,
 ) -> np.ndarray:
     """Instance labels (uint16 HxW, 0 = not an object).
 
     height_m: HxW height of each pixel above its support level (m), for merge_geometric.
     outline: HxW float, the boundary network's outline probability (steers merging, merge_fragments);
     outline_edges: HxW bool, its ridges: separating edges like depth jumps.
+    scorer: merge_model.LearnedMerge on this grid: the learned merging of touching regions.
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
     but only count for an instance that has enough area of its own in object_mask.
@@ -452,7 +490,7 @@ def cluster_instances(
     smooth = object_mask & ~near_edge
     n = int(fragments.max())
     labels = merge_fragments(
-        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, outline
+        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, outline, scorer
     )
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)

@@ -15,6 +15,7 @@ from arm_segmentation.boundary import BorderParams, grow_into_objectness, neares
 from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
+from arm_segmentation.merge_model import LearnedMerge, MergeParams, pixel_statistics, shared_classifier
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
 from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample, upsample_linear
 from arm_segmentation.table_plane import (
@@ -86,6 +87,7 @@ class SegmentationParams:
     occluders: OccluderParams = field(default_factory=OccluderParams)
     border: BorderParams = field(default_factory=BorderParams)
     boundary: BoundaryParams = field(default_factory=BoundaryParams)
+    merge: MergeParams = field(default_factory=MergeParams)
 
 
 @dataclass
@@ -192,15 +194,36 @@ def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int
     return stage
 
 
-def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, outline=None) -> np.ndarray:
-    """outline: None, or the outline probability on stage's grid (learned_outline)."""
+def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, outline=None, scorer=None):
+    """outline: None, or the outline probability on stage's grid (learned_outline); scorer: None, or
+    the learned merging on stage's grid (merge_scorer)."""
     ridges = None if outline is None else outline_ridges(outline, params.boundary.threshold)
     labels = cluster_instances(
         stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
         stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, outline,
-        ridges,
+        ridges, scorer,
     )  # fmt: skip
     return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
+
+
+def merge_scorer(stage: _Stage, rgb, outline, cluster: ClusterParams, grid, params: SegmentationParams, factory=None):
+    """The learned merging (merge_model.LearnedMerge) on stage's grid, or None without the boundary
+    network's outline map or the classifier's weights. grid: (rows, cols) slices of the full frame
+    that stage covers. factory(grid, stats, height_m, outline, cluster) replaces the
+    classifier (seg_merge_train's oracle)."""
+    if outline is None:
+        return None
+    if factory is None:
+        classifier = shared_classifier(params.merge)
+        if classifier is None:
+            return None
+
+        def factory(_, *args):
+            return LearnedMerge(classifier, *args, threshold=params.merge.threshold)
+
+    stats = pixel_statistics(stage.chroma, rgb, stage.normals_camera, np.where(stage.objects, stage.area, 0.0))
+    height_m = np.where(stage.objects & stage.valid, stage.points_world[..., 2] - stage.support, np.nan)
+    return factory(grid, stats, height_m, outline, cluster)
 
 
 def fine_crop(objects: np.ndarray, stride: int, shape: tuple[int, int], fine: FineParams):
@@ -258,11 +281,14 @@ def learned_maps(rgb: np.ndarray, stage: _Stage, params: BoundaryParams) -> np.n
     return maps
 
 
-def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None):
+def segment_detailed(
+    rgb, depth_m, K, T_world_camera, params: SegmentationParams | None = None, exclude=None, merge_factory=None
+):  # fmt: skip
     """Segment one frame; also returns the table mask and the support levels found.
 
     exclude: optional HxW bool, pixels that are never objects (the robot's own arm, self_filter):
-    they are treated as having no depth and are cleared from the labels.
+    they are treated as having no depth and are cleared from the labels. merge_factory: replaces
+    the merge classifier (merge_scorer; for training it).
 
     Support levels are always estimated on the working grid. When the objects fit in a crop of at
     most params.fine.max_pixels full-resolution pixels, they are clustered on that crop at full
@@ -295,14 +321,19 @@ def segment_detailed(rgb, depth_m, K, T_world_camera, params: SegmentationParams
         radii_px = params.fine.candidate_radius_px, params.fine.missing_candidate_radius_px
         _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, radii_px)
         fine_outline = None if outline is None else _upsampled_crop(outline, crop, stride, depth_full.shape)
+        feature_outline = None if maps is None else _upsampled_crop(maps[0], crop, stride, depth_full.shape)
+        scorer = merge_scorer(fine, rgb_full[crop], feature_outline, cluster, crop, params, merge_factory)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
-        labels[crop] = _cluster(fine, cluster, params, fine_outline)
+        labels[crop] = _cluster(fine, cluster, params, fine_outline, scorer)
         table = upsample(stage.table, stride, depth_full.shape)
         table[crop] = fine.table
     else:
         radii_px = params.candidate_radius_px, params.missing_candidate_radius_px
         _colour(stage, rgb, K, T, params, params.table_colour_window_px, radii_px)
-        labels = _cluster(stage, params.cluster, params, outline)
+        grid = (slice(None, None, stride), slice(None, None, stride))
+        feature_outline = None if maps is None else maps[0]
+        scorer = merge_scorer(stage, rgb, feature_outline, params.cluster, grid, params, merge_factory)
+        labels = _cluster(stage, params.cluster, params, outline, scorer)
         table = stage.table
         if stride > 1:
             labels = refine_full_resolution(

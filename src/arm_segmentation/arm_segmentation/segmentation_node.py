@@ -21,6 +21,7 @@ from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
+from arm_segmentation.merge_model import MergeParams, shared_classifier
 from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.self_filter import SelfFilterParams, arm_positions, base_pose, self_mask
@@ -114,8 +115,20 @@ class SegmentationNode(Node):
         self.get_logger().info(
             f"boundary network: {predictor.path}" if predictor else "boundary network off: geometric and colour cues"
         )
+        merge = MergeParams(
+            enabled=declare(self, "merge_classifier", True, "Merge touching fragments by the learned classifier"),
+            threshold=declare(self, "merge_threshold", 0.5, "Probability above which fragments merge", 0.05, 0.95),
+            checkpoint=declare(self, "merge_checkpoint", "", "Merge classifier weights ('' = the shipped ones)"),
+        )
+        try:
+            classifier = shared_classifier(merge)
+        except (FileNotFoundError, ValueError) as error:
+            raise ValueError(f"merge_checkpoint: {error}") from error
+        if classifier is not None and predictor is None:
+            self.get_logger().warning("merge classifier needs the boundary network's maps: merging by colour")
         self.params = SegmentationParams(
             boundary=boundary,
+            merge=merge,
             working_stride=stride,
             workspace_min_m=tuple(float(v) for v in workspace_min),
             workspace_max_m=tuple(float(v) for v in workspace_max),

@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+
+from arm_segmentation.clustering import ClusterParams, merge_fragments
+from arm_segmentation.merge_model import (
+    FEATURE_NAMES,
+    LearnedMerge,
+    MergeClassifier,
+    MergeParams,
+    pixel_statistics,
+    region_pair_features,
+    shared_classifier,
+)
+from arm_segmentation.merge_train import OracleMerge, save
+
+
+def _three_fragments():
+    """Fragments A | B | C side by side on one flat surface; A and B one true object, C another."""
+    labels = np.repeat(np.arange(1, 4), 10)[None, :].repeat(10, axis=0)
+    truth = np.where(labels < 3, 1, 2)
+    rgb = np.full((10, 30, 3), 120, dtype=np.uint8)
+    rgb[:, 20:] = (60, 160, 90)
+    chroma = (rgb - rgb.mean(axis=-1, keepdims=True)) / 255.0
+    normals = np.zeros((10, 30, 3))
+    normals[..., 2] = -1.0
+    area = np.full((10, 30), 1e-4)
+    stats = pixel_statistics(chroma, rgb, normals, area)
+    height = np.full((10, 30), 0.05)
+    height[:, ::10] = 0.0  # every fragment reaches its support
+    return labels, truth, chroma.astype(np.float32), stats, height, area
+
+
+def test_pair_features_do_not_depend_on_the_order_of_the_pair():
+    labels, _, _, stats, height, _ = _three_fragments()
+    merge = LearnedMerge(None, stats, height, np.zeros(labels.shape), ClusterParams())
+    merge.start(labels, 3)
+    owner = np.arange(4)
+    counts = np.array([[20.0, 0.0, 0.0, 18.0, 2.0]])
+    forward = merge.features(owner, np.array([[1, 3]]), counts)
+    backward = merge.features(owner, np.array([[3, 1]]), counts)
+    assert forward.shape == (1, len(FEATURE_NAMES)) and np.allclose(forward, backward)
+    names = dict(zip(FEATURE_NAMES, forward[0], strict=True))
+    assert names["chroma_distance"] > 0.2 and names["continuous_share"] == 1.0
+    assert names["low_small_m"] == pytest.approx(0.0) and names["normal_cosine"] == pytest.approx(1.0)
+    assert region_pair_features(np.zeros((0, 2), int), np.zeros((0, 5)), merge.sums, merge.size, merge.low,
+                                merge.high, 2).shape == (0, len(FEATURE_NAMES))  # fmt: skip
+
+
+def test_oracle_merging_joins_one_object_and_records_the_pairs():
+    labels, truth, chroma, stats, height, area = _three_fragments()
+    depth = np.full(labels.shape, 0.8, dtype=np.float32)
+    records: list = []
+    oracle = OracleMerge(truth, records, stats, height, np.zeros(labels.shape), ClusterParams())
+    merged = merge_fragments(labels, 3, depth, chroma, area, ClusterParams(), scorer=oracle)
+    assert len(np.unique(merged[:, :20])) == 1 and np.all(merged[:, 20:] != merged[0, 0])
+    features, same, smaller = records[0]
+    assert features.shape == (2, len(FEATURE_NAMES)) and sorted(same.tolist()) == [False, True]
+    assert np.all(smaller == 100)
+
+
+def test_classifier_round_trip_and_bad_weights(tmp_path):
+    rng = np.random.default_rng(0)
+    n = len(FEATURE_NAMES)
+    layers = [(rng.normal(size=(n, 4)).astype(np.float32), np.zeros(4, np.float32)),
+              (rng.normal(size=(4, 1)).astype(np.float32), np.zeros(1, np.float32))]  # fmt: skip
+    path = tmp_path / "merge.npz"
+    save(path, np.zeros(n, np.float32), np.ones(n, np.float32), layers, {"note": "test"})
+    classifier = MergeClassifier(path)
+    features = rng.normal(size=(7, n)).astype(np.float32)
+    expected = 1.0 / (1.0 + np.exp(-(np.maximum(features @ layers[0][0], 0.0) @ layers[1][0])[:, 0]))
+    assert np.allclose(classifier.probability(features), expected, atol=1e-5)
+    assert (tmp_path / "merge.md").read_text().startswith("# Merge classifier")
+    (tmp_path / "junk.npz").write_bytes(b"not weights")
+    with pytest.raises(ValueError, match="not merge classifier weights"):
+        MergeClassifier(tmp_path / "junk.npz")
+    with pytest.raises(FileNotFoundError):
+        shared_classifier(MergeParams(checkpoint=str(tmp_path / "missing.npz")))
+    assert shared_classifier(MergeParams(enabled=False)) is None
