@@ -475,7 +475,10 @@ def cluster_instances(
         fragments = seed_textured_regions(fragments, mask & ~geometric, params.small_fragment_px)
     if params.flood_strict_chroma_threshold > 0:
         fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_strict_chroma_threshold)
-    fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_chroma_threshold)
+    # With the classifier, a second strict pass (from the grown regions' colours) instead of the loose
+    # one: the classifier merges what a loose flood would have claimed, and tells objects apart.
+    loose = params.flood_chroma_threshold if scorer is None else params.flood_strict_chroma_threshold
+    fragments = flood(fragments, mask, chroma, params.flood_iterations, loose)
     leftover, n_left = ndimage.label(mask & (fragments == 0))
     if n_left:
         sizes = np.bincount(leftover.ravel(), minlength=n_left + 1)
