@@ -251,14 +251,15 @@ def _agglomerate(
         means = np.stack([np.bincount(owner, weights=frag_sums[:, k], minlength=n + 1) for k in range(3)], 1)
         means /= np.maximum(size, 1.0)[:, None]
         ra, rb = region_pairs[:, 0], region_pairs[:, 1]
-        distance = np.abs(means[ra] - means[rb]).sum(axis=1)
-        small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
-        limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
-        ok = _should_merge(region_counts, params) & (distance <= limit)
         if scorer is not None:
             probability = scorer.probability(owner, region_pairs, region_counts)
             ok = (region_counts[:, :3].sum(axis=1) >= params.min_contact_px) & (probability > scorer.threshold)
             distance = 1.0 - probability
+        else:
+            distance = np.abs(means[ra] - means[rb]).sum(axis=1)
+            small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
+            limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
+            ok = _should_merge(region_counts, params) & (distance <= limit)
         if use_outline:
             mean_outline = contact_outline(region_counts)
             ok &= mean_outline <= params.outline_separate
@@ -299,6 +300,17 @@ def _mutual_best(ra: np.ndarray, rb: np.ndarray, distance: np.ndarray, ok: np.nd
     return ok & (best_pair[ra] == index) & (best_pair[rb] == index)
 
 
+def widest_disc_m(labels: np.ndarray, n: int, area_m2: np.ndarray) -> np.ndarray:
+    """(n + 1,) radius (m) of the widest disc inside each label 0..n (pixel side sqrt(area_m2))."""
+    inner = np.ones(labels.shape, dtype=np.uint8)
+    inner[:-1] &= labels[:-1] == labels[1:]
+    inner[1:] &= labels[1:] == labels[:-1]
+    inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
+    inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
+    radius_m = cv2.distanceTransform(inner, cv2.DIST_L2, 3) * np.sqrt(area_m2)
+    return np.asarray(ndimage.maximum(radius_m, labels, np.arange(n + 1)), dtype=np.float64)
+
+
 def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, outline=None) -> np.ndarray:
     """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
     both sides above their support) when one of them cannot be an object on its own: it does not
@@ -314,13 +326,7 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
         join &= contact_outline(counts) <= params.outline_separate
     low = ndimage.minimum(np.where(smooth, height_m, np.inf), labels, np.arange(n + 1))
     floating = np.asarray(low) > params.resting_height_m
-    inner = np.ones(labels.shape, dtype=np.uint8)
-    inner[:-1] &= labels[:-1] == labels[1:]
-    inner[1:] &= labels[1:] == labels[:-1]
-    inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
-    inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
-    radius_m = cv2.distanceTransform(inner, cv2.DIST_L2, 3) * np.sqrt(area_m2)
-    thin = np.asarray(ndimage.maximum(radius_m, labels, np.arange(n + 1))) < params.thick_fragment_m
+    thin = widest_disc_m(labels, n, area_m2) < params.thick_fragment_m
     alone = floating | thin
     join &= alone[pairs[:, 0]] | alone[pairs[:, 1]]
     return _compact(_union(n, pairs[join])[labels], 0)

@@ -17,10 +17,9 @@ from __future__ import annotations
 import pathlib
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from arm_segmentation.clustering import hue_distance
+from arm_segmentation.clustering import hue_distance, widest_disc_m
 
 CHECKPOINT_DIR = pathlib.Path(__file__).resolve().parent / "checkpoints"
 DEFAULT_CHECKPOINT = CHECKPOINT_DIR / "merge.npz"
@@ -145,12 +144,18 @@ class MergeClassifier:
 
     def probability(self, features: np.ndarray) -> np.ndarray:
         """(P,) probability that each region pair is one object."""
-        x = (np.asarray(features, dtype=np.float32) - self.mean) / self.scale
-        for k, (w, b) in enumerate(self.layers):
-            x = x @ w + b
-            if k < len(self.layers) - 1:
-                x = np.maximum(x, 0.0)
-        return 1.0 / (1.0 + np.exp(-np.clip(x[:, 0], -30.0, 30.0)))
+        return perceptron_probability(features, self.mean, self.scale, self.layers)
+
+
+def perceptron_probability(features, mean, scale, layers) -> np.ndarray:
+    """(P,) sigmoid output of the perceptron `layers` [(weights, bias), ...] (ReLU between them) on
+    features standardised by mean and scale."""
+    x = (np.asarray(features, dtype=np.float32) - mean) / scale
+    for k, (w, b) in enumerate(layers):
+        x = x @ w + b
+        if k < len(layers) - 1:
+            x = np.maximum(x, 0.0)
+    return 1.0 / (1.0 + np.exp(-np.clip(x[:, 0], -30.0, 30.0)))
 
 
 def _sums_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -186,46 +191,38 @@ class LearnedMerge:
         self.high = np.full(n + 1, -np.inf)
         np.minimum.at(self.low, flat[known], height[known])
         np.maximum.at(self.high, flat[known], height[known])
-        self.radius_m = _widest_disc_m(labels, n, self.stats[..., _AREA])
+        self.radius_m = widest_disc_m(labels, n, self.stats[..., _AREA])
 
-    def features(self, owner: np.ndarray, pairs: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    def _regions(self, owner: np.ndarray) -> dict:
+        """The regions' pixels, statistic sums, lowest and highest height and widest disc."""
         n = len(owner)
-        size = np.bincount(owner, weights=self.size, minlength=n)
-        sums = _sums_by(owner, self.sums, n)
-        low, high = np.full(n, np.inf), np.full(n, -np.inf)
+        low, high, radius = np.full(n, np.inf), np.full(n, -np.inf), np.zeros(n)
         np.minimum.at(low, owner, self.low)
         np.maximum.at(high, owner, self.high)
-        return region_pair_features(pairs, counts, sums, size, low, high, self.cluster.contact_radius_px)
-
-    def standing_apart(self, owner: np.ndarray, pairs: np.ndarray, features: np.ndarray) -> np.ndarray:
-        """(P,) bool: pairs of regions that could each stand as an object and differ in colour."""
-        n = len(owner)
-        low, radius = np.full(n, np.inf), np.zeros(n)
-        np.minimum.at(low, owner, self.low)
         np.maximum.at(radius, owner, self.radius_m)
-        standing = (low <= self.cluster.resting_height_m) & (radius >= self.cluster.thick_fragment_m)
+        size = np.bincount(owner, weights=self.size, minlength=n)
+        return {"size": size, "sums": _sums_by(owner, self.sums, n), "low": low, "high": high, "radius": radius}
+
+    def features(self, owner: np.ndarray, pairs: np.ndarray, counts: np.ndarray, regions=None) -> np.ndarray:
+        r = regions or self._regions(owner)
+        return region_pair_features(
+            pairs, counts, r["sums"], r["size"], r["low"], r["high"], self.cluster.contact_radius_px
+        )
+
+    def standing_apart(self, regions: dict, pairs: np.ndarray, features: np.ndarray) -> np.ndarray:
+        """(P,) bool: pairs of regions that could each stand as an object and differ in colour."""
+        standing = (regions["low"] <= self.cluster.resting_height_m) & (
+            regions["radius"] >= self.cluster.thick_fragment_m
+        )
         colour = features[:, FEATURE_NAMES.index("chroma_distance")] > self.cluster.merge_chroma_threshold
         return standing[pairs[:, 0]] & standing[pairs[:, 1]] & colour
 
     def probability(self, owner: np.ndarray, pairs: np.ndarray, counts: np.ndarray) -> np.ndarray:
         """(P,) probability that each region pair (ids into owner's range) is one object."""
-        features = self.features(owner, pairs, counts)
+        regions = self._regions(owner)
+        features = self.features(owner, pairs, counts, regions)
         probability = self.classifier.probability(features)
-        return np.where(self.standing_apart(owner, pairs, features), 0.0, probability)
-
-
-def _widest_disc_m(labels: np.ndarray, n: int, area_m2: np.ndarray) -> np.ndarray:
-    """(n + 1,) radius (m) of the widest disc inside each label's pixels (pixel side sqrt(area))."""
-    inner = np.ones(labels.shape, dtype=np.uint8)
-    inner[:-1] &= labels[:-1] == labels[1:]
-    inner[1:] &= labels[1:] == labels[:-1]
-    inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
-    inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
-    inner &= labels > 0
-    radius = cv2.distanceTransform(inner, cv2.DIST_L2, 3) * np.sqrt(area_m2)
-    out = np.zeros(n + 1)
-    np.maximum.at(out, labels.ravel(), radius.ravel())
-    return out
+        return np.where(self.standing_apart(regions, pairs, features), 0.0, probability)
 
 
 _CLASSIFIERS: dict[str, MergeClassifier | None] = {}

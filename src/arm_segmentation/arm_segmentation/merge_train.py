@@ -25,7 +25,13 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
-from arm_segmentation.merge_model import DEFAULT_CHECKPOINT, FEATURE_NAMES, LearnedMerge, MergeClassifier
+from arm_segmentation.merge_model import (
+    DEFAULT_CHECKPOINT,
+    FEATURE_NAMES,
+    LearnedMerge,
+    MergeClassifier,
+    perceptron_probability,
+)
 
 DEFAULT_DATA = pathlib.Path("data/seg_merge")
 SPLIT_SEED_OFFSET = {"train": 300_000, "test": 400_000}
@@ -53,16 +59,14 @@ class OracleMerge(LearnedMerge):
         majority = np.argmax(region_hist[:, 1:], axis=1) + 1
         majority[region_hist[:, 0] >= region_hist[:, 1:].max(axis=1)] = 0
         a, b = majority[pairs[:, 0]], majority[pairs[:, 1]]
-        touching = counts[:, :3].sum(axis=1) >= 3
-        known = (a > 0) & (b > 0) & touching
+        known = (a > 0) & (b > 0) & (counts[:, :3].sum(axis=1) >= 3)
         same = a == b
-        size = np.bincount(owner, weights=self.size, minlength=len(owner))
-        smaller = np.minimum(size[pairs[:, 0]], size[pairs[:, 1]])
-        features = self.features(owner, pairs, counts)
+        regions = self._regions(owner)
+        smaller = np.minimum(regions["size"][pairs[:, 0]], regions["size"][pairs[:, 1]])
+        features = self.features(owner, pairs, counts, regions)
         self.records.append((features[known], same[known], smaller[known]))
         if self.classifier is not None:
-            probability = self.classifier.probability(features)
-            return np.where(self.standing_apart(owner, pairs, features), 0.0, probability)
+            return super().probability(owner, pairs, counts)
         return np.where(known & same, 1.0, 0.0)
 
 
@@ -171,20 +175,22 @@ def train(features, same, weight, hidden: int, steps: int, seed: int):
 
 
 def accuracy(classifier_layers, mean, scale, features, same, weight) -> dict:
-    x = (features - mean) / scale
-    for k, (w, b) in enumerate(classifier_layers):
-        x = x @ w + b
-        if k < len(classifier_layers) - 1:
-            x = np.maximum(x, 0.0)
-    predicted = x[:, 0] > 0
+    """Pair counts and rates of the perceptron on (features, same); a rate over no pairs is None."""
+    predicted = perceptron_probability(features, mean, scale, classifier_layers) > 0.5
     truth = same > 0.5
+
+    def share(values, weights=None):
+        if len(values) == 0:
+            return None
+        return round(float(np.average(values, weights=weights)), 4)
+
     return {
         "pairs": int(len(truth)),
-        "share_same": round(float(truth.mean()), 3),
-        "accuracy": round(float(np.mean(predicted == truth)), 4),
-        "weighted_accuracy": round(float(np.sum(weight * (predicted == truth)) / np.sum(weight)), 4),
-        "false_merge_rate": round(float(np.mean(predicted[~truth])), 4),
-        "missed_merge_rate": round(float(np.mean(~predicted[truth])), 4),
+        "share_same": share(truth),
+        "accuracy": share(predicted == truth),
+        "weighted_accuracy": share(predicted == truth, weight) if len(truth) and np.sum(weight) > 0 else None,
+        "false_merge_rate": share(predicted[~truth]),
+        "missed_merge_rate": share(~predicted[truth]),
     }
 
 

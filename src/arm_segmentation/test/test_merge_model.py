@@ -76,3 +76,20 @@ def test_classifier_round_trip_and_bad_weights(tmp_path):
     with pytest.raises(FileNotFoundError):
         shared_classifier(MergeParams(checkpoint=str(tmp_path / "missing.npz")))
     assert shared_classifier(MergeParams(enabled=False)) is None
+
+
+def test_seg_merge_train_makes_shards_trains_and_resumes(tmp_path):
+    from arm_segmentation.merge_train import main
+
+    out = tmp_path / "merge.npz"
+    args = ["--data", str(tmp_path / "data"), "--train-shards", "1", "--test-shards", "1", "--views", "1"]
+    args += ["--steps", "5", "--hidden", "4", "--out", str(out)]
+    assert main(args) == 0
+    shards = sorted(p.name for p in (tmp_path / "data").rglob("*.npz"))
+    assert shards == ["shard_000000.npz", "shard_000000.npz"]
+    classifier = MergeClassifier(out)
+    assert len(classifier.layers) == 3 and classifier.layers[0][0].shape == (len(FEATURE_NAMES), 4)
+    stamp = (tmp_path / "data" / "train" / "shard_000000.npz").stat().st_mtime_ns
+    assert main([*args, "--policy", str(out)]) == 0  # the oracle's shards are kept, the policy's made
+    assert (tmp_path / "data" / "train" / "shard_000000.npz").stat().st_mtime_ns == stamp
+    assert len(list((tmp_path / "data").glob("policy_*/train/shard_000000.npz"))) == 1
