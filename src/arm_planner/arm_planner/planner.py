@@ -123,6 +123,8 @@ class PlannerConfig:
     # Rearrange: the hand's top speed (m/s) while it holds the object, as a cap on every sampled path
     # (0: no cap). Faster, the object swings about the fingers' closing axis and drops.
     carry_hand_speed_m_s: float = 0.2
+    # Rearrange: close the fingers along the carry direction when the object fits (GraspReward).
+    carry_closing_along: bool = True
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
@@ -252,7 +254,11 @@ class Planner:
         if request.task in (TASK_GRASP, TASK_REARRANGE):
             carry = self.config.rearrange_carry_height_m if request.task == TASK_REARRANGE else 0.0
             reward = GraspReward(
-                **common, goal_displacement=displacement, close_steps=self.config.close_steps, carry_height_m=carry
+                **common,
+                goal_displacement=displacement,
+                close_steps=self.config.close_steps,
+                carry_height_m=carry,
+                finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
             )
         elif request.task == TASK_PUSH:
             joint = int(self.model.body_jntadr[target_id])

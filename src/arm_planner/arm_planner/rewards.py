@@ -193,6 +193,12 @@ class GraspReward(TaskReward):
     # beyond it, the angle weight per radian (tilted 60-100 degrees, the object swings out of the
     # fingers; penalised from 0, the planner gave up the goal near joint limits to stay upright).
     carry_free_tilt_rad: float = float(np.radians(30.0))
+    # Rearrange: the open fingers' inner gap (m; 0: unknown). When the object's extent along the carry
+    # direction plus `carry_closing_margin_m` each side fits it, the fingers close along the carry
+    # direction rather than across the object's narrowest extent: accelerating along the closing axis,
+    # the object's inertia pushes on a finger, across it, it swings about the grip.
+    finger_gap_open_m: float = 0.0
+    carry_closing_margin_m: float = 0.01
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
@@ -208,6 +214,11 @@ class GraspReward(TaskReward):
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
         self.grasp_offset = self.grasp_point - g.com_world
         self.closing_axis = self.geometry.minor_axis_xy()
+        if self.carry_height_m > 0 and self.finger_gap_open_m > 0:
+            carry = np.append(self.goal_displacement[:2], 0.0)
+            carry /= np.linalg.norm(carry) + 1e-9
+            if np.ptp(_offsets_along(g, carry[:2])) + 2 * self.carry_closing_margin_m <= self.finger_gap_open_m:
+                self.closing_axis = carry
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
@@ -269,16 +280,19 @@ class GraspReward(TaskReward):
             # drags it away (and tips it) before the grip forms.
             grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
         if self.state == "grasped":
-            # Rearrange: the hand stays within carry_free_tilt_rad of pointing down while it carries the
-            # object. A grasp only lifts: no term, as in the paper.
-            upright = w.angle if self.carry_height_m > 0 else 0.0
-            reach = self.blend(
-                hands,
-                lambda pos, rot: (
-                    -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
-                    - upright * _tilt_beyond(rot, self.carry_free_tilt_rad)
-                ),
-            )
+            # The hand stays with the object: scored on the simulated hand only. The commanded one sits
+            # above the held object by the arm's sag under load, and pulling it onto the object lowered
+            # a rearrange's carry by ~0.5 / (goal distance gradient) until the object dragged on the table.
+            reach = -w.distance * np.linalg.norm(hands[0][1] - grasp_point, axis=-1)
+            if self.carry_height_m > 0:
+                # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while carrying
+                # the object does not sink below the carry height (the goal distance alone hardly
+                # changes with height when the goal is far away). A grasp only lifts: no term, as in the paper.
+                free = self.carry_free_tilt_rad
+                reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
+                if self.carry_phase == "carry":
+                    carry_z = self.goal[2] + self.carry_height_m
+                    reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
         def score(pos, rot):
