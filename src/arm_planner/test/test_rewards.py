@@ -272,3 +272,65 @@ def test_rearrange_replanned_mid_carry_carries_on_at_the_height_from_its_start()
     lifting = _rearrange(obstacle)
     lifting.resume("grasped", 5)
     assert lifting.carry_phase == "lift"
+
+
+def _held(reward: GraspReward, command_offset=(0.0, 0.0, 0.0)):
+    """States [hand (simulated), target, commanded hand] and a reward reading them: hand pointing down."""
+    reward.hand = _poses_from(0)
+    reward.target = _poses_from(3)
+    reward.nq = 6
+    reward.arm_qpos_adr, reward.arm_actuators = np.arange(3), np.arange(3)
+
+    def states_at(target):
+        hand = np.asarray(target, dtype=np.float64) + reward.grasp_offset
+        return np.concatenate([hand, target]), hand + np.asarray(command_offset)
+
+    return states_at
+
+
+def test_carrying_the_object_below_the_carry_height_costs_more_than_its_distance_to_the_goal():
+    reward = _rearrange()
+    reward.resume("grasped", 0)
+    reward.carry_phase = "carry"
+    states_at = _held(reward)
+    level = reward.start_com + [0.02, 0.02, reward.carry_height_m]
+    sagged = level - [0.0, 0.0, 0.03]
+    (a, ca), (b, cb) = states_at(level), states_at(sagged)
+    scores = reward(np.stack([a, b]), np.stack([ca, cb]))
+    distance_gap = np.linalg.norm(reward.carry_goal(sagged) - sagged) - np.linalg.norm(reward.carry_goal(level) - level)
+    assert distance_gap < 0.005, "far from the goal, sinking 3 cm hardly changes the distance"
+    assert scores[0] - scores[1] > 0.1, "but the carry height holds it up"
+
+
+def test_held_object_is_not_pulled_down_by_the_commanded_hand_sitting_above_it():
+    reward = _rearrange()
+    reward.resume("grasped", 0)
+    reward.carry_phase = "carry"
+    states_at = _held(reward)
+    level = reward.start_com + [0.02, 0.02, reward.carry_height_m]
+    state, hand = states_at(level)
+    # The servos lag by the whole horizon: the simulated hand is where it is whatever the command. A
+    # command 4 mm above it (the arm's sag under the load) holds the height; one at it lowers the arm.
+    holding, lowering = hand + [0.0, 0.0, 0.004], hand
+    scores = reward(np.stack([state, state]), np.stack([holding, lowering]))
+    assert scores[0] >= scores[1] - 1e-12
+
+
+def test_rearrange_fingers_close_along_the_carry_when_the_object_fits():
+    def closing(extents, gap=0.082):
+        box = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (0.0, 0.06)]) * [*extents, 1.0] / 2
+        geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), box, 0.0)
+        return GraspReward(
+            hand=None,
+            target=None,
+            geometry=geometry,
+            qpos_offset=0,
+            nq=0,
+            goal_displacement=np.array([0.2, 0.0, 0.0]),
+            carry_height_m=0.04,
+            finger_gap_open_m=gap,
+        ).closing_axis
+
+    np.testing.assert_allclose(np.abs(closing((0.04, 0.03))), [1.0, 0.0, 0.0], atol=1e-9, err_msg="fits: along")
+    np.testing.assert_allclose(np.abs(closing((0.07, 0.03))), [0.0, 1.0, 0.0], atol=1e-9, err_msg="too long")
+    np.testing.assert_allclose(np.abs(closing((0.04, 0.03), gap=0.0)), [0.0, 1.0, 0.0], atol=1e-9, err_msg="no gap")
