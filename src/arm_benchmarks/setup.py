@@ -23,6 +23,7 @@ setup(
             "make_shape_set = arm_benchmarks.shape_set:main",
             "bench_recon = arm_benchmarks.bench_recon:main",
             "bench_manip = arm_benchmarks.bench_manip:main",
+            "bench_manip_pool = arm_benchmarks.manip_pool:main",
             "bench_robustness = arm_benchmarks.bench_robustness:main",
             "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
             "bench_pushability = arm_benchmarks.pushability:main",
