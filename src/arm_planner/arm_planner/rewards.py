@@ -280,19 +280,23 @@ class GraspReward(TaskReward):
             # drags it away (and tips it) before the grip forms.
             grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
         if self.state == "grasped":
-            # The hand stays with the object: scored on the simulated hand only. The commanded one sits
-            # above the held object by the arm's sag under load, and pulling it onto the object lowered
-            # a rearrange's carry by ~0.5 / (goal distance gradient) until the object dragged on the table.
+            # The hand stays with the object. A rearrange scores it on the simulated hand only: the
+            # commanded one sits above the held object by the arm's sag under load, and pulling it onto
+            # the object lowered the carry until the object dragged on the table (the goal distance
+            # hardly changes with height when the goal is far away). A grasp lifts straight up, against
+            # the goal's full gradient; there the blend stays (simulated only, it lost 4 of 54 lifts).
+            if self.carry_height_m <= 0:  # a grasp only lifts: no other term, as in the paper
+                return self.blend(
+                    hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
+                ) - w.goal * np.linalg.norm(self.goal - target_pos, axis=-1)
+            # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while carrying
+            # the object does not sink below the carry height.
+            free = self.carry_free_tilt_rad
             reach = -w.distance * np.linalg.norm(hands[0][1] - grasp_point, axis=-1)
-            if self.carry_height_m > 0:
-                # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while carrying
-                # the object does not sink below the carry height (the goal distance alone hardly
-                # changes with height when the goal is far away). A grasp only lifts: no term, as in the paper.
-                free = self.carry_free_tilt_rad
-                reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
-                if self.carry_phase == "carry":
-                    carry_z = self.goal[2] + self.carry_height_m
-                    reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
+            reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
+            if self.carry_phase == "carry":
+                carry_z = self.goal[2] + self.carry_height_m
+                reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
         def score(pos, rot):
