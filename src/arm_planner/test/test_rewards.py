@@ -195,11 +195,18 @@ REARRANGE = np.array([0.20, 0.20, 0.0])
 _CUBE = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, 0.06)])
 
 
-def _rearrange(obstacles=None) -> GraspReward:
+def _rearrange(obstacles=None, box=_CUBE, goal_displacement=REARRANGE, **options) -> GraspReward:
     obstacles = np.zeros((0, 3)) if obstacles is None else obstacles
-    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), _CUBE, 0.0, obstacle_vertices_world=obstacles)
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), box, 0.0, obstacle_vertices_world=obstacles)
     return GraspReward(
-        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=REARRANGE, carry_height_m=0.04
+        hand=None,
+        target=None,
+        geometry=geometry,
+        qpos_offset=0,
+        nq=0,
+        goal_displacement=goal_displacement,
+        carry_height_m=0.04,
+        **options,
     )
 
 
@@ -288,26 +295,24 @@ def test_rearrange_replanned_mid_carry_carries_on_at_the_height_from_its_start()
     assert lifting.carry_phase == "lift"
 
 
-def _held(reward: GraspReward, command_offset=(0.0, 0.0, 0.0)):
-    """States [hand (simulated), target, commanded hand] and a reward reading them: hand pointing down."""
-    reward.hand = _poses_from(0)
-    reward.target = _poses_from(3)
-    reward.nq = 6
+def _carrying():
+    """(a rearrange carrying its object, states_at, a target point at the carry height): states_at(target)
+    gives the state [simulated hand, target] and the commanded hand at the simulated one (hand down)."""
+    reward = _rearrange()
+    reward.resume("grasped", 0)
+    reward.carry_phase = "carry"
+    reward.hand, reward.target, reward.nq = _poses_from(0), _poses_from(3), 6
     reward.arm_qpos_adr, reward.arm_actuators = np.arange(3), np.arange(3)
 
     def states_at(target):
         hand = np.asarray(target, dtype=np.float64) + reward.grasp_offset
-        return np.concatenate([hand, target]), hand + np.asarray(command_offset)
+        return np.concatenate([hand, target]), hand
 
-    return states_at
+    return reward, states_at, reward.start_com + [0.02, 0.02, reward.carry_height_m]
 
 
 def test_carrying_the_object_below_the_carry_height_costs_more_than_its_distance_to_the_goal():
-    reward = _rearrange()
-    reward.resume("grasped", 0)
-    reward.carry_phase = "carry"
-    states_at = _held(reward)
-    level = reward.start_com + [0.02, 0.02, reward.carry_height_m]
+    reward, states_at, level = _carrying()
     sagged = level - [0.0, 0.0, 0.03]
     (a, ca), (b, cb) = states_at(level), states_at(sagged)
     scores = reward(np.stack([a, b]), np.stack([ca, cb]))
@@ -317,11 +322,7 @@ def test_carrying_the_object_below_the_carry_height_costs_more_than_its_distance
 
 
 def test_held_object_is_not_pulled_down_by_the_commanded_hand_sitting_above_it():
-    reward = _rearrange()
-    reward.resume("grasped", 0)
-    reward.carry_phase = "carry"
-    states_at = _held(reward)
-    level = reward.start_com + [0.02, 0.02, reward.carry_height_m]
+    reward, states_at, level = _carrying()
     state, hand = states_at(level)
     # The servos lag by the whole horizon: the simulated hand is where it is whatever the command. A
     # command 4 mm above it (the arm's sag under the load) holds the height; one at it lowers the arm.
@@ -333,17 +334,7 @@ def test_held_object_is_not_pulled_down_by_the_commanded_hand_sitting_above_it()
 def test_rearrange_fingers_close_along_the_carry_when_the_object_fits():
     def closing(extents, gap=0.082):
         box = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (0.0, 0.06)]) * [*extents, 1.0] / 2
-        geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), box, 0.0)
-        return GraspReward(
-            hand=None,
-            target=None,
-            geometry=geometry,
-            qpos_offset=0,
-            nq=0,
-            goal_displacement=np.array([0.2, 0.0, 0.0]),
-            carry_height_m=0.04,
-            finger_gap_open_m=gap,
-        ).closing_axis
+        return _rearrange(box=box, goal_displacement=np.array([0.2, 0.0, 0.0]), finger_gap_open_m=gap).closing_axis
 
     np.testing.assert_allclose(np.abs(closing((0.04, 0.03))), [1.0, 0.0, 0.0], atol=1e-9, err_msg="fits: along")
     np.testing.assert_allclose(np.abs(closing((0.07, 0.03))), [0.0, 1.0, 0.0], atol=1e-9, err_msg="too long")
