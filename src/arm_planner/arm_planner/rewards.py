@@ -94,17 +94,11 @@ def _angle_down(rot: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(-rot[..., 2, 2], -1.0, 1.0))
 
 
-def _huber(angle: np.ndarray, knee_rad: float) -> np.ndarray:
-    """Huber cost of an angle (radians): a^2 / (2 knee) up to the knee, then a - knee / 2 (slope 1
-    beyond, the same as at the knee); with knee 0, the angle."""
-    if knee_rad <= 0:
-        return angle
-    return np.where(angle <= knee_rad, 0.5 * angle**2 / knee_rad, angle - 0.5 * knee_rad)
-
-
-def _tilt_cost(rot: np.ndarray, knee_rad: float) -> np.ndarray:
-    """Huber cost (_huber) of the hand's tilt from pointing down."""
-    return _huber(_angle_down(rot), knee_rad)
+def _tilt_cost(rot: np.ndarray, free_rad: float) -> np.ndarray:
+    """Huber cost of the hand's tilt from pointing down (radians): t^2 / (2 free_rad) up to free_rad,
+    then t - free_rad / 2 (slope 1 beyond, the same as at the edge)."""
+    tilt = _angle_down(rot)
+    return np.where(tilt <= free_rad, 0.5 * tilt**2 / free_rad, tilt - 0.5 * free_rad)
 
 
 def _yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
@@ -469,13 +463,13 @@ class PushReward(TaskReward):
 
     def _with_pushing_terms(self, reward: np.ndarray, to_go: np.ndarray, speed: np.ndarray, free_tilt_rad=0.0):
         """reward less, while pushing: the rest point's distance to the goal, object speed the hand could
-        not stop from, and the object's tilt (Huber, knee free_tilt_rad)."""
+        not stop from, and the object's tilt beyond free_tilt_rad."""
         w = self.weights
         tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
         reward = reward - w.goal * self.push_goal_weight * to_go
         braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)  # the speed the hand can still stop from
         reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
-        return reward - self.upright * _huber(tilt, free_tilt_rad)
+        return reward - self.upright * np.maximum(tilt - free_tilt_rad, 0.0)
 
     def _engage_distance(self, state: np.ndarray) -> float:
         """The hand's distance (m) from where it engages the object, at an executed state."""
@@ -526,9 +520,8 @@ class CagePushReward(PushReward):
     press_m: float = 0.01
     # Per radian between the finger closing axis and the push direction.
     cage_yaw: float = 0.5
-    # The object's lean costs `upright` times a Huber function with this knee (rad): little while it
-    # leans into the front finger (pushed by the rear finger it leans until the front one holds it),
-    # linear beyond. Free up to the knee, top-heavy T-shapes rode at 15-20 degrees and fell over.
+    # The object may lean this far (rad) into the front finger unpenalised: pushed by the rear finger
+    # it leans until the front one holds it.
     cage_tilt_rad: float = 0.3
 
     def __post_init__(self):
