@@ -94,11 +94,9 @@ def _angle_down(rot: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(-rot[..., 2, 2], -1.0, 1.0))
 
 
-def _tilt_cost(rot: np.ndarray, free_rad: float) -> np.ndarray:
-    """Huber cost of the hand's tilt from pointing down (radians): t^2 / (2 free_rad) up to free_rad,
-    then t - free_rad / 2 (slope 1 beyond, the same as at the edge)."""
-    tilt = _angle_down(rot)
-    return np.where(tilt <= free_rad, 0.5 * tilt**2 / free_rad, tilt - 0.5 * free_rad)
+def _tilt_beyond(rot: np.ndarray, free_rad: float) -> np.ndarray:
+    """How far (radians) the hand's approach axis tilts from world -z beyond free_rad; 0 within it."""
+    return np.maximum(_angle_down(rot) - free_rad, 0.0)
 
 
 def _yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
@@ -191,10 +189,9 @@ class GraspReward(TaskReward):
     lift_first_within_m: float = 0.01
     lift_timeout_steps: int = 100
     place_within_m: float = 0.02
-    # Rearrange, while grasped: the hand's tilt from pointing down costs the angle weight times a Huber
-    # function with this knee (radians): quadratic up to it, linear beyond (tilted 60-100 degrees, the
-    # object swings out of the fingers; linear from 0, the planner gave up the goal near joint limits to
-    # stay upright; free up to it, the hand leaned to the knee, swinging the object towards the goal).
+    # Rearrange, while grasped: the hand's tilt from pointing down costs nothing up to this (radians);
+    # beyond it, the angle weight per radian (tilted 60-100 degrees, the object swings out of the
+    # fingers; penalised from 0, the planner gave up the goal near joint limits to stay upright).
     carry_free_tilt_rad: float = float(np.radians(30.0))
     # Rearrange: the open fingers' inner gap (m; 0: unknown). When the object's extent along the carry
     # direction plus `carry_closing_margin_m` each side fits it, the fingers close along the carry
@@ -296,7 +293,7 @@ class GraspReward(TaskReward):
             # the object does not sink below the carry height.
             free = self.carry_free_tilt_rad
             reach = -w.distance * np.linalg.norm(hands[0][1] - grasp_point, axis=-1)
-            reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_cost(rot, free))
+            reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
             if self.carry_phase == "carry":
                 carry_z = self.goal[2] + self.carry_height_m
                 reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from arm_planner.rewards import CagePushReward, GraspReward, PushReward, RewardWeights, TargetGeometry, _tilt_cost
+from arm_planner.rewards import CagePushReward, GraspReward, PushReward, RewardWeights, TargetGeometry, _tilt_beyond
 
 GOAL = np.array([0.05, -0.30, 0.0])
 
@@ -252,14 +252,12 @@ def _hand_tilted(degrees: float) -> np.ndarray:
     return tilt @ np.diag([1.0, -1.0, -1.0])
 
 
-def test_carry_tilt_costs_little_near_upright_and_grows_linearly_beyond_the_band():
+def test_carry_tilt_costs_nothing_within_the_free_band_and_grows_linearly_beyond():
     free = np.radians(30.0)
-    assert _tilt_cost(_hand_tilted(0.0), free) == pytest.approx(0.0, abs=1e-9)
-    assert _tilt_cost(_hand_tilted(10.0), free) == pytest.approx(np.radians(10.0) ** 2 / (2 * free))
-    at_edge = _tilt_cost(_hand_tilted(30.0), free)
-    assert at_edge == pytest.approx(free / 2)
-    assert _tilt_cost(_hand_tilted(60.0), free) == pytest.approx(at_edge + np.radians(30.0)), "slope 1 beyond"
-    assert _tilt_cost(_hand_tilted(90.0), free) == pytest.approx(at_edge + np.radians(60.0))
+    assert _tilt_beyond(_hand_tilted(0.0), free) == pytest.approx(0.0, abs=1e-9)
+    assert _tilt_beyond(_hand_tilted(25.0), free) == pytest.approx(0.0, abs=1e-9)
+    assert _tilt_beyond(_hand_tilted(60.0), free) == pytest.approx(np.radians(30.0))
+    assert _tilt_beyond(_hand_tilted(90.0), free) == pytest.approx(np.radians(60.0))
 
 
 def test_rearrange_replanned_mid_carry_carries_on_at_the_height_from_its_start():
