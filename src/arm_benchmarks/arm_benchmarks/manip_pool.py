@@ -38,31 +38,29 @@ def pool(runs: list[pathlib.Path]) -> tuple[dict, list[dict], list[str]]:
     """
     read = [(run, *read_run(run)) for run in runs]
     design = {k: read[0][1].get(k) for k in DESIGN_KEYS}
-    covered: dict[str, str] = {}
+    for run, settings, _ in read:
+        this = {k: settings.get(k) for k in DESIGN_KEYS}
+        if this != design:
+            diff = sorted(k for k in DESIGN_KEYS if this[k] != design[k])
+            raise ValueError(f"{run}: another design than {runs[0]} ({', '.join(diff)} differ)")
+    source: dict[str, int] = {}  # task -> index into read
     for partial in (True, False):
-        for run, settings, _ in read:
-            this = {k: settings.get(k) for k in DESIGN_KEYS}
-            if this != design:
-                diff = sorted(k for k in DESIGN_KEYS if this[k] != design[k])
-                raise ValueError(f"{run}: another design than {runs[0]} ({', '.join(diff)} differ)")
+        for i, (_, settings, _) in enumerate(read):
             if ("only_tasks" in settings) != partial:
                 continue
-            source = f"{run} (run key {settings['run_key']})"
             for task in settings.get("only_tasks", settings["tasks"]):
-                if partial and task in covered:
-                    raise ValueError(f"task {task!r} is in both {covered[task]} and {source}")
-                covered.setdefault(task, source)
-    missing = [t for t in design["tasks"] if t not in covered]
+                if partial and task in source:
+                    raise ValueError(f"task {task!r} is in both {read[source[task]][0]} and {read[i][0]}")
+                source.setdefault(task, i)
+    missing = [t for t in design["tasks"] if t not in source]
     if missing:
         raise ValueError(f"no run covers task(s) {', '.join(missing)}")
     methods = [m for m in read[0][1]["methods"] if all(m in settings["methods"] for _, settings, _ in read)]
     rows = [
-        r
-        for run, settings, mine in read
-        for r in mine
-        if covered.get(r["task"], "").startswith(f"{run} (run key {settings['run_key']})") and r["method"] in methods
+        r for i, (_, _, mine) in enumerate(read) for r in mine if source.get(r["task"]) == i and r["method"] in methods
     ]
-    return design | {"methods": methods, "pooled_from": covered}, rows, methods
+    pooled_from = {task: f"{read[i][0]} (run key {read[i][1]['run_key']})" for task, i in source.items()}
+    return design | {"methods": methods, "pooled_from": pooled_from}, rows, methods
 
 
 def main(argv=None) -> int:

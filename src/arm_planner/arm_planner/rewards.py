@@ -292,7 +292,8 @@ class GraspReward(TaskReward):
             # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while carrying
             # the object does not sink below the carry height.
             free = self.carry_free_tilt_rad
-            reach = -w.distance * np.linalg.norm(hands[0][1] - grasp_point, axis=-1)
+            _, simulated_hand_pos, _ = hands[0]
+            reach = -w.distance * np.linalg.norm(simulated_hand_pos - grasp_point, axis=-1)
             reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
             if self.carry_phase == "carry":
                 carry_z = self.goal[2] + self.carry_height_m
