@@ -569,6 +569,16 @@ class CagePushReward(PushReward):
     def gripper_closed(self) -> bool:
         return False
 
+    def _direction(self, target_pos: np.ndarray) -> np.ndarray:
+        """As PushReward's, but reversed once the object is past the goal along the commanded
+        displacement: the cage holds the object fore and aft, so the front finger pushes it back
+        (an object that slid further in the world than in the twin otherwise stays overshot)."""
+        nominal = self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
+        past = (target_pos[..., :2] - self.goal[:2]) @ nominal > 0.0
+        aim = self.goal[:2] + np.where(past, -self.aim_beyond_m, self.aim_beyond_m)[..., None] * nominal
+        to_aim = aim - target_pos[..., :2]
+        return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
+
     def gripper_command(self, open_command: float, closed_command: float) -> float:
         """Open while approaching; while pushing, closed to the object's extent along the push plus
         cage_margin_m each side (the inner gap changes by twice the command of one finger)."""

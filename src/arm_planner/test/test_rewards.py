@@ -170,6 +170,18 @@ def test_cage_comes_down_over_the_object_then_leads_with_the_rear_finger_pressin
     assert scores[1] > scores[0], "pushing, the hand leads so the rear finger presses on the object"
 
 
+def test_cage_pushes_an_object_that_slid_past_the_goal_back_with_the_front_finger():
+    reward = _cage_on((0.04, 0.03, 0.04))
+    reward.resume("pushing", 0)
+    past = reward.goal + [0.03, 0.0, 0.0]
+    cage = past + reward.cage_offset
+    lead = reward.cage_margin_m + reward.press_m
+    forward = np.concatenate([cage + [lead, 0.0, 0.0], past])
+    back = np.concatenate([cage - [lead, 0.0, 0.0], past])
+    scores = reward(np.stack([forward, back]), np.zeros((2, 0)))
+    assert scores[1] > scores[0], "past the goal, the hand leads back towards it"
+
+
 def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_push():
     reward = _cage_on((0.04, 0.03, 0.064))
     assert reward.gripper_command(0.04, 0.0) == 0.04
