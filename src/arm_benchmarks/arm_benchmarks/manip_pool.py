@@ -17,8 +17,9 @@ import pathlib
 from arm_benchmarks.bench_stats import BINS, summarise, write_plots, write_report
 from arm_core.stats import json_safe
 
-# Settings that define the design: runs pooled together must agree on them.
-DESIGN_KEYS = ("episodes", "seed", "tasks", "bins", "objects", "domain", "target_scale")
+# Settings that define the design: runs pooled together must agree on them (observe_period_s: closed
+# loop every so many seconds, 0 = open loop).
+DESIGN_KEYS = ("episodes", "seed", "tasks", "bins", "objects", "domain", "target_scale", "observe_period_s")
 
 
 def read_run(run: pathlib.Path) -> tuple[dict, list[dict]]:

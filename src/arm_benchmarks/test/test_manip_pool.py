@@ -5,6 +5,7 @@ import pytest
 from arm_benchmarks import manip_pool
 
 DESIGN = {"episodes": 6, "seed": 0, "tasks": ["grasp", "push"], "bins": ["1.0"], "objects": "procedural"}
+DESIGN |= {"observe_period_s": 0.1}
 
 
 def _run(folder, key, successes, only_tasks=None, **changes):
@@ -34,7 +35,7 @@ def test_a_partial_run_replaces_its_tasks_of_the_full_run(tmp_path):
     assert arm["by_task"] == {"grasp": 0.0, "push": 1.0}, "grasp from the full run, push from the partial one"
     assert arm["n"] == 6, "rows of other run keys do not count"
     assert set(summary["settings"]["pooled_from"]) == {"grasp", "push"}
-    assert (out / "report.md").is_file()
+    assert "closed loop" in (out / "report.md").read_text(), "the execution is part of the design"
 
 
 def test_runs_of_another_design_or_covering_a_task_twice_are_refused(tmp_path):
@@ -42,6 +43,9 @@ def test_runs_of_another_design_or_covering_a_task_twice_are_refused(tmp_path):
     other_seed = _run(tmp_path / "seed1", "k2", {"grasp": True, "push": True}, only_tasks=["push"], seed=1)
     with pytest.raises(ValueError, match="seed"):
         manip_pool.pool([full, other_seed])
+    open_loop = _run(tmp_path / "open", "k5", {"grasp": True, "push": True}, only_tasks=["push"], observe_period_s=0.0)
+    with pytest.raises(ValueError, match="observe_period_s"):
+        manip_pool.pool([full, open_loop])
     a = _run(tmp_path / "a", "k3", {"grasp": True, "push": True}, only_tasks=["push"])
     b = _run(tmp_path / "b", "k4", {"grasp": True, "push": True}, only_tasks=["push"])
     with pytest.raises(ValueError, match="both"):
