@@ -49,7 +49,7 @@ class OracleMerge(LearnedMerge):
 
     def start(self, labels: np.ndarray, n: int) -> None:
         super().start(labels, n)
-        width = int(self.gt.max()) + 1
+        width = max(int(self.gt.max()), 1) + 1  # a crop may hold no true object: nothing then merges
         hist = np.bincount((labels.astype(np.int64) * width + self.gt).ravel(), minlength=(n + 1) * width)
         self.fragment_hist = hist.reshape(n + 1, width).astype(np.float64)
 

@@ -58,6 +58,15 @@ def test_oracle_merging_joins_one_object_and_records_the_pairs():
     assert np.all(smaller == 100)
 
 
+def test_oracle_merges_nothing_where_no_true_object_is_in_view():
+    labels, truth, chroma, stats, height, area = _three_fragments()
+    depth = np.full(labels.shape, 0.8, dtype=np.float32)
+    records: list = []
+    oracle = OracleMerge(np.zeros_like(truth), records, stats, height, np.zeros(labels.shape), ClusterParams())
+    merged = merge_fragments(labels, 3, depth, chroma, area, ClusterParams(), scorer=oracle)
+    assert len(np.unique(merged)) == 3 and records[0][0].shape[0] == 0
+
+
 def test_classifier_round_trip_and_bad_weights(tmp_path):
     rng = np.random.default_rng(0)
     n = len(FEATURE_NAMES)
