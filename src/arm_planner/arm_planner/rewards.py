@@ -286,18 +286,17 @@ class GraspReward(TaskReward):
             # hardly changes with height when the goal is far away). A grasp lifts straight up, against
             # the goal's full gradient; there the blend stays (simulated only, it lost 4 of 54 lifts).
             if self.carry_height_m <= 0:  # a grasp only lifts: no other term, as in the paper
-                return self.blend(
-                    hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
-                ) - w.goal * np.linalg.norm(self.goal - target_pos, axis=-1)
-            # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while carrying
-            # the object does not sink below the carry height.
-            free = self.carry_free_tilt_rad
-            _, simulated_hand_pos, _ = hands[0]
-            reach = -w.distance * np.linalg.norm(simulated_hand_pos - grasp_point, axis=-1)
-            reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
-            if self.carry_phase == "carry":
-                carry_z = self.goal[2] + self.carry_height_m
-                reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
+                reach = self.blend(hands, lambda pos, rot: -w.distance * np.linalg.norm(pos - grasp_point, axis=-1))
+            else:
+                # Rearrange: the hand stays within carry_free_tilt_rad of pointing down, and while
+                # carrying the object does not sink below the carry height.
+                free = self.carry_free_tilt_rad
+                _, simulated_hand_pos, _ = hands[0]
+                reach = -w.distance * np.linalg.norm(simulated_hand_pos - grasp_point, axis=-1)
+                reach = reach - self.blend(hands, lambda pos, rot: w.angle * _tilt_beyond(rot, free))
+                if self.carry_phase == "carry":
+                    carry_z = self.goal[2] + self.carry_height_m
+                    reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
         def score(pos, rot):
@@ -365,6 +364,8 @@ class PushReward(TaskReward):
     target_vel_adr: int | None = None
     friction: float = 0.9
     aim_beyond_m: float = 0.05
+    # Push an object that slid past the goal back (needs a finger ahead of it: the cage).
+    push_back_past_goal: bool = False
     # Object speed above sqrt(2 a d), d the distance still to go, is penalised (m/s^2, per m/s).
     braking_m_s2: float = 1.0
     speed_weight: float = 5.0
@@ -402,9 +403,15 @@ class PushReward(TaskReward):
 
     def _direction(self, target_pos: np.ndarray) -> np.ndarray:
         """Push direction: towards a point aim_beyond_m past the goal along the commanded displacement,
-        which corrects sideways drift but does not swing round when the object is at the goal."""
+        which corrects sideways drift but does not swing round when the object is at the goal. With
+        push_back_past_goal, an object past the goal along the displacement is aimed back, aim_beyond_m
+        short of the goal."""
         nominal = self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
-        to_aim = self.goal[:2] + self.aim_beyond_m * nominal - target_pos[..., :2]
+        beyond = np.full(target_pos.shape[:-1], self.aim_beyond_m)
+        if self.push_back_past_goal:
+            past = (target_pos[..., :2] - self.goal[:2]) @ nominal > 0.0
+            beyond = np.where(past, -beyond, beyond)
+        to_aim = self.goal[:2] + beyond[..., None] * nominal - target_pos[..., :2]
         return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
 
     def _approach_axis(self, target_pos: np.ndarray) -> np.ndarray:
@@ -521,6 +528,8 @@ class CagePushReward(PushReward):
     # The object may lean this far (rad) into the front finger unpenalised: pushed by the rear finger
     # it leans until the front one holds it.
     cage_tilt_rad: float = 0.3
+    # The front finger pushes back an object that slid past the goal in the world but not in the twin.
+    push_back_past_goal: bool = True
 
     def __post_init__(self):
         g = self.geometry
@@ -568,16 +577,6 @@ class CagePushReward(PushReward):
     @property
     def gripper_closed(self) -> bool:
         return False
-
-    def _direction(self, target_pos: np.ndarray) -> np.ndarray:
-        """As PushReward's, but reversed once the object is past the goal along the commanded
-        displacement: the cage holds the object fore and aft, so the front finger pushes it back
-        (an object that slid further in the world than in the twin otherwise stays overshot)."""
-        nominal = self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
-        past = (target_pos[..., :2] - self.goal[:2]) @ nominal > 0.0
-        aim = self.goal[:2] + np.where(past, -self.aim_beyond_m, self.aim_beyond_m)[..., None] * nominal
-        to_aim = aim - target_pos[..., :2]
-        return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
 
     def gripper_command(self, open_command: float, closed_command: float) -> float:
         """Open while approaching; while pushing, closed to the object's extent along the push plus
