@@ -406,13 +406,20 @@ class PushReward(TaskReward):
         which corrects sideways drift but does not swing round when the object is at the goal. With
         push_back_past_goal, an object past the goal along the displacement is aimed back, aim_beyond_m
         short of the goal."""
-        nominal = self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
+        nominal = self._nominal_xy()
         beyond = np.full(target_pos.shape[:-1], self.aim_beyond_m)
         if self.push_back_past_goal:
-            past = (target_pos[..., :2] - self.goal[:2]) @ nominal > 0.0
-            beyond = np.where(past, -beyond, beyond)
+            beyond = np.where(self._past_goal(target_pos), -beyond, beyond)
         to_aim = self.goal[:2] + beyond[..., None] * nominal - target_pos[..., :2]
         return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
+
+    def _nominal_xy(self) -> np.ndarray:
+        """Unit horizontal direction of the commanded displacement."""
+        return self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
+
+    def _past_goal(self, xy: np.ndarray) -> np.ndarray:
+        """Per position (world xy..., m): beyond the goal along the commanded displacement."""
+        return (xy[..., :2] - self.goal[:2]) @ self._nominal_xy() > 0.0
 
     def _approach_axis(self, target_pos: np.ndarray) -> np.ndarray:
         direction = self._direction(target_pos) * np.sin(self.tilt_rad)
@@ -450,6 +457,10 @@ class PushReward(TaskReward):
         rest, speed = self.rest_xy(states, target_pos)
         to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
         settled = to_go < self.settled_m
+        if not self.push_back_past_goal:
+            # One finger cannot bring back an object that will come to rest past the goal: pushing on
+            # only takes it further, so the hand backs off as it does at the goal.
+            settled |= self._past_goal(rest)
         gap = np.where(settled, self.retreat_gap_m, self.push_gap_m if pushing else self.contact_gap_m)
         contact = self._contact_point(target_pos, self.target_rot, gap)
         axis = self._approach_axis(target_pos)

@@ -170,6 +170,26 @@ def test_cage_comes_down_over_the_object_then_leads_with_the_rear_finger_pressin
     assert scores[1] > scores[0], "pushing, the hand leads so the rear finger presses on the object"
 
 
+def test_one_finger_backs_off_an_object_that_slid_past_the_goal_instead_of_pushing_it_further():
+    box = np.array([[i, j, k] for i in (-0.02, 0.02) for j in (-0.02, 0.02) for k in (0.0, 0.06)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.03]), box, 0.0)
+    reward = PushReward(
+        hand=_poses_from(0), target=_poses_from(3), geometry=geometry, qpos_offset=0, nq=6,
+        goal_displacement=np.array([0.3, 0.0, 0.0]),
+    )  # fmt: skip
+    reward.resume("pushing", 0)
+
+    def pressing_beats_backing_off(object_x_m: float) -> bool:
+        at = reward.goal + [object_x_m - reward.goal[0], 0.03, 0.0]  # 3 cm to the side, short of or past
+        press = reward._contact_point(at[None], np.eye(3)[None], reward.push_gap_m)[0]
+        back = reward._contact_point(at[None], np.eye(3)[None], reward.retreat_gap_m)[0]
+        scores = reward(np.stack([np.concatenate([press, at]), np.concatenate([back, at])]), np.zeros((2, 0)))
+        return bool(scores[0] > scores[1])
+
+    assert pressing_beats_backing_off(reward.goal[0] - 0.05), "short of the goal, the finger pushes"
+    assert not pressing_beats_backing_off(reward.goal[0] + 0.01), "past it, pushing only takes it further"
+
+
 def test_cage_pushes_an_object_that_slid_past_the_goal_back_with_the_front_finger():
     reward = _cage_on((0.04, 0.03, 0.04))
     reward.resume("pushing", 0)
