@@ -30,7 +30,7 @@ from arm_ros.common import (
 )
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg
-from arm_ros.goal_activity import GoalActivity
+from arm_ros.goal_activity import declare_goal_pause
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
@@ -86,9 +86,6 @@ class ReconstructionNode(Node):
             self, "max_rate_hz", 0.0, "Most frames reconstructed per second (wall clock); 0 = every frame", 0.0, 100.0
         )
         self.min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
-        pause = declare(self, "pause_during_goals", True, "Hold frames back while the planner serves a goal")
-        action = declare(self, "manipulate_action", "arm/manipulate", "The planner's action, for pause_during_goals")
-        pause_limit_s = declare(self, "goal_pause_limit_s", 60.0, "Longest pause for one goal, s", 1.0, 3600.0)
         self.cpu_niceness = declare_cpu_niceness(self)
 
         settings = ReconstructionSettings(
@@ -127,7 +124,7 @@ class ReconstructionNode(Node):
         self._stage_values: dict = {}
         self._status = (DiagnosticStatus.OK, "waiting for frames")
         self.create_timer(1.0, self.publish_diagnostics)
-        self.goals = GoalActivity(self, action, pause_limit_s, self._notify) if pause else None
+        self.goals = declare_goal_pause(self, "frames", self._notify)
         self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
         self._worker.start()
         self.get_logger().info(

@@ -5,7 +5,11 @@ publishes arm_interfaces/SegmentedFrame plus a colourised overlay for viewers.
 With camera_pose_source:=estimate there is no camera/pose input: T_world_camera is estimated from
 each frame's depth (arm_segmentation.pose_tracking: the last estimate is reused while its table
 plane still fits), published on camera/pose/estimated, and a frame without a usable support plane
-is skipped with the reason in the log and in /diagnostics."""
+is skipped with the reason in the log and in /diagnostics.
+
+While the planner serves a goal (pause_during_goals, as reconstruction_node) camera messages are
+dropped unprocessed: reconstruction holds frames back then anyway, and planning gets the CPU.
+Set it false on both nodes for closed-loop re-planning from new meshes (plan_node's replan_period_s)."""
 
 import time
 
@@ -17,6 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
 from arm_ros.conversions.poses import matrix_to_pose
+from arm_ros.goal_activity import declare_goal_pause
 from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
@@ -154,6 +159,8 @@ class SegmentationNode(Node):
         self.last_latency_ms = 0.0
         self.last_instances = 0
         self.last_error = ""
+        self.messages_skipped_for_goals = 0
+        self.goals = declare_goal_pause(self, "camera frames")
         self.create_timer(1.0, self.publish_diagnostics)
         mode = "ground-truth masks" if self.use_ground_truth else "segmentation"
         self.get_logger().info(
@@ -192,6 +199,9 @@ class SegmentationNode(Node):
         )  # fmt: skip
 
     def on_message(self, index: int, msg) -> None:
+        if self.goals is not None and self.goals.seconds_left() > 0:
+            self.messages_skipped_for_goals += 1
+            return
         stamp = stamp_s(msg)
         if not (stamp == stamp and abs(stamp) < 1e12):
             self.errors.error("bad_stamp", f"{self.inputs[index]} message has an invalid stamp")
@@ -248,6 +258,9 @@ class SegmentationNode(Node):
             "ground_truth_masks": self.use_ground_truth,
             "self_filter": self.self_filter,
             "joint_states_received": self.joint_q is not None,
+            "goal_pauses": self.goals.pauses if self.goals else 0,
+            "paused_for_goal": bool(self.goals and self.goals.seconds_left() > 0),
+            "messages_skipped_for_goals": self.messages_skipped_for_goals,
         }
         array = diagnostics_msg(self, "segmentation", values, level, message)
         if self.tracker is not None:

@@ -1,5 +1,6 @@
 """segmentation_node in its own process, fed over real DDS by this test."""
 
+import threading
 import time
 
 import numpy as np
@@ -12,10 +13,13 @@ use_private_domain()
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.action import ActionClient, ActionServer  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from seg_fixtures import Box, add_noise, look_at, render  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
+from arm_interfaces.action import Manipulate  # noqa: E402
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
 from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image  # noqa: E402
 from arm_ros.conversions.poses import matrix_to_pose  # noqa: E402
@@ -205,6 +209,74 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
     output = node.log()
     assert code == 0, output
     assert "camera pose: no plane" in output
+
+
+@pytest.mark.slow
+def test_camera_frames_are_dropped_while_the_planner_serves_a_goal(probe, tmp_path):
+    """A real Manipulate action server (in this process) holds a goal open: frames sent meanwhile are
+    not segmented; once the goal ends, the next frame is."""
+    rgb, depth, gt, K = render([Box((0.0, 0.0, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40))], CAMERA)
+    node = NodeProcess("segmentation", tmp_path / "segmentation.log", params={"image_reliability": "reliable"})
+    got = {"frames": [], "diag": []}
+    probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
+    probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
+    publishers = [
+        probe.create_publisher(kind, topic, 10)
+        for kind, topic in [
+            (Image, "camera/color/image_raw"),
+            (Image, "camera/depth/image_raw"),
+            (CameraInfo, "camera/camera_info"),
+            (PoseStamped, "camera/pose"),
+        ]
+    ]
+    release = threading.Event()
+
+    def execute(goal_handle):
+        release.wait(60.0)
+        goal_handle.succeed()
+        return Manipulate.Result(success=True)
+
+    planner = rclpy.create_node("planner_stand_in")
+    server = ActionServer(planner, Manipulate, "arm/manipulate", execute)
+    spinner = MultiThreadedExecutor()  # execute blocks: the server spins on its own
+    spinner.add_node(planner)
+    threading.Thread(target=spinner.spin, daemon=True).start()
+    action_client = ActionClient(probe, Manipulate, "arm/manipulate")
+
+    def status():
+        values = [{kv.key: kv.value for kv in s.values} for d in got["diag"] for s in d.status]
+        return [v for v in values if "messages_skipped_for_goals" in v]
+
+    def send(stamp_s):
+        for p, m in zip(publishers, frame_messages(stamp_s, rgb, depth, K), strict=True):
+            p.publish(m)
+            rclpy.spin_once(probe, timeout_sec=0.05)
+
+    try:
+        assert spin_until(probe, lambda: all(p.get_subscription_count() > 0 for p in publishers), 30.0)
+        assert action_client.wait_for_server(timeout_sec=10.0)
+        action_client.send_goal_async(Manipulate.Goal(task=0, target_id=1))
+        assert spin_until(probe, lambda: status() and status()[-1]["paused_for_goal"] == "True", 20.0)
+        for stamp_s in (1.0, 2.0, 3.0):
+            send(stamp_s)
+        assert spin_until(probe, lambda: int(status()[-1]["messages_skipped_for_goals"]) >= 12, 10.0)
+        assert got["frames"] == []
+        release.set()
+        assert spin_until(probe, lambda: status()[-1]["paused_for_goal"] == "False", 20.0)
+        for stamp_s in (10.0, 11.0, 12.0):  # latest-frame processing: resend until one is segmented
+            send(stamp_s)
+            if spin_until(probe, lambda: got["frames"], 5.0):
+                break
+        assert got["frames"] and got["frames"][0].header.stamp.sec >= 10
+        assert int(status()[-1]["goal_pauses"]) == 1
+    finally:
+        release.set()
+        code = node.stop(timeout_s=10.0)
+        spinner.shutdown()
+        server.destroy()
+        action_client.destroy()
+        planner.destroy_node()
+    assert code == 0, node.log()
 
 
 @pytest.mark.slow
