@@ -8,6 +8,7 @@ removal, convex decomposition and a visible-fraction estimate. Usable without RO
 
 import pathlib
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -47,6 +48,10 @@ STAGES = (
     "decomposition",
     "visibility",
 )
+
+
+class ReconstructionPreempted(Exception):
+    """The frame was abandoned between stages because Reconstructor.should_stop() said so."""
 
 
 class StageTimer:
@@ -208,6 +213,13 @@ class Reconstructor:
         self.k = float(self.settings.k or getattr(model, "grid_k", CHECKPOINT_DEFAULT_K))  # load_checkpoint sets it
         self.decomposer = ConvexDecomposer(self.settings.decomposition)
         self.timer = StageTimer()
+        # Checked between stages and between objects' convex decompositions: True abandons the frame
+        # (ReconstructionPreempted), e.g. so that a planner that just got a goal has the CPU.
+        self.should_stop: Callable[[], bool] | None = None
+
+    def _stop_if_asked(self) -> None:
+        if self.should_stop is not None and self.should_stop():
+            raise ReconstructionPreempted("frame abandoned between stages")
 
     @property
     def last_timings_s(self) -> dict[str, float]:
@@ -227,6 +239,7 @@ class Reconstructor:
             raise GridInputError(f"rgb shape {np.asarray(rgb).shape} does not match depth {np.asarray(depth_m).shape}")
         self.timer.reset()
         grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
+        self._stop_if_asked()
         probabilities = self.predict(grids)
         return self.build_objects(grids, probabilities, depth_m, labels, K, T_world_camera)
 
@@ -256,6 +269,7 @@ class Reconstructor:
         probabilities [N, d, d, d] laid out in grids.frames (the stages after the network)."""
         s = self.settings
         labels = np.asarray(labels)
+        self._stop_if_asked()
         with self.timer("meshing"):
             # What was seen of an object is part of it: observed voxels (F1) the network missed are
             # added. Where it predicted nothing (a sliver of an object, mostly), the observed voxels
@@ -287,6 +301,7 @@ class Reconstructor:
             with self.timer("snapping"):
                 snapped = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
                 meshes = [m if done else n for m, n, done in zip(meshes, snapped, revolved, strict=True)]
+        self._stop_if_asked()
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
                 meshes, _ = remove_intersections(meshes)
@@ -297,6 +312,7 @@ class Reconstructor:
                 reason = f"no voxel above threshold {s.threshold} for object {object_id}"
                 objects[object_id] = _empty_object(object_id, s.method, reason, frame)
                 continue
+            self._stop_if_asked()
             T_world_object = _object_pose(mesh)
             local = mesh.copy().apply_translation(-T_world_object[:3, 3])
             with self.timer("decomposition"):

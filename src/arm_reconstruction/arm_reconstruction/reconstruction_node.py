@@ -2,7 +2,8 @@
 
 Frames are reconstructed by one worker thread that always takes the newest frame; a frame that
 arrives while another waits replaces it (counted as dropped). While the planner serves a goal
-(pause_during_goals) frames wait, so planning has the CPU; the newest is reconstructed after.
+(pause_during_goals) frames wait, so planning has the CPU, and a frame in progress when the goal
+comes is abandoned at the next stage boundary; the newest is reconstructed after.
 Malformed frames are logged (rate-limited) and nothing is published for them. Diagnostics
 (per-stage latency, frame counts) follow every frame and a 1 s timer.
 """
@@ -36,7 +37,7 @@ from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
 from .messages import main_table_height, markers_msg, objects_to_msg
 from .network import METHODS
-from .pipeline import STAGES, ReconstructionSettings, Reconstructor
+from .pipeline import STAGES, ReconstructionPreempted, ReconstructionSettings, Reconstructor
 
 
 class ReconstructionNode(Node):
@@ -125,6 +126,9 @@ class ReconstructionNode(Node):
         self._status = (DiagnosticStatus.OK, "waiting for frames")
         self.create_timer(1.0, self.publish_diagnostics)
         self.goals = declare_goal_pause(self, "frames", self._notify)
+        self.preempted = 0
+        if self.goals is not None:  # a frame in progress when a goal comes is abandoned, redone after it
+            self.reconstructor.should_stop = lambda: self.goals.seconds_left() > 0
         self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
         self._worker.start()
         self.get_logger().info(
@@ -180,6 +184,12 @@ class ReconstructionNode(Node):
         try:
             frame = frame_from_msg(msg)
             objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
+        except ReconstructionPreempted:
+            self.preempted += 1
+            with self._wake:
+                if self._latest is None:  # nothing newer came: this frame is redone after the goal
+                    self._latest = msg
+            return
         except (ConversionError, FrameInputError) as error:
             self._reject(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
             return
@@ -229,6 +239,7 @@ class ReconstructionNode(Node):
             "frames_dropped": self.dropped,
             "frames_rejected": self.rejected,
             "goal_pauses": self.goals.pauses if self.goals else 0,
+            "frames_preempted_by_goals": self.preempted,
             "paused_for_goal": bool(self.goals and self.goals.seconds_left() > 0),
         }
         level, message = self._status

@@ -10,7 +10,13 @@ from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
 from arm_reconstruction.meshing import to_manifold
 from arm_reconstruction.network import build_model
-from arm_reconstruction.pipeline import STAGES, ReconstructionSettings, Reconstructor, reconstruct
+from arm_reconstruction.pipeline import (
+    STAGES,
+    ReconstructionPreempted,
+    ReconstructionSettings,
+    Reconstructor,
+    reconstruct,
+)
 from arm_reconstruction.train import train
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
@@ -59,6 +65,24 @@ def test_objects_the_network_leaves_empty_are_meshed_from_their_observed_voxels(
         assert np.all(centres >= lo - obj.grid.voxel_size_m) and np.all(centres <= hi + obj.grid.voxel_size_m)
     assert set(reconstructor.last_timings_s) == set(STAGES)
     assert reconstructor.last_timings_s["network"] > 0
+
+
+def test_a_frame_asked_to_stop_is_abandoned_at_the_next_stage_and_the_next_frame_runs_whole(sim, checkpoints):
+    _, frame = sim
+    reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(checkpoints / "arm.pt")))
+    checks = []
+
+    def stop_at_the_third_check() -> bool:
+        checks.append(dict(reconstructor.last_timings_s))
+        return len(checks) == 3
+
+    reconstructor.should_stop = stop_at_the_third_check
+    with pytest.raises(ReconstructionPreempted):
+        reconstructor(*args(frame))
+    assert len(checks) == 3 and checks[-1]["network"] > 0 and checks[-1]["decomposition"] == 0
+    assert reconstructor.last_timings_s["decomposition"] == 0
+    objects = reconstructor(*args(frame))  # later checks say go on
+    assert len(checks) > 3 and objects and all(o.ok for o in objects)
 
 
 def test_objects_from_ground_truth_occupancy_are_simulation_ready(sim, checkpoints):

@@ -234,7 +234,8 @@ def test_node_reconstructs_frames_of_real_camera_resolutions(checkpoint, ros_con
 
 def test_frames_wait_while_the_planner_serves_a_goal(sim, checkpoint, ros_context):
     """A real Manipulate action server holds a goal open: the frame sent meanwhile is reconstructed
-    only once the goal ends, and a second frame sent meanwhile replaces it."""
+    only once the goal ends, a second frame sent meanwhile replaces it, and a frame under way is
+    abandoned."""
     _, frame = sim
     release = threading.Event()
 
@@ -261,6 +262,8 @@ def test_frames_wait_while_the_planner_serves_a_goal(sim, checkpoint, ros_contex
                 assert spin_until(executor, lambda: node.received == count, 20)  # noqa: B023
             spin_until(executor, lambda: node.processed > 0, 3.0)
             assert node.processed == 0 and node.dropped == 1 and node.goals.pauses == 1
+            node.process(frame_msg(frame))  # a frame already under way when the goal came: abandoned
+            assert node.preempted == 1 and node.processed == 0
             release.set()
             assert spin_until(executor, lambda: node.processed == 1, 120)
             assert node.goals.seconds_left() == 0.0
