@@ -1,3 +1,4 @@
+
 from setuptools import find_packages, setup
 
 package_name = "arm_benchmarks"
@@ -16,8 +17,7 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={
-        "console_scripts": [
+    entry_points={"console_scripts": [
             "bench_perf = arm_benchmarks.bench_perf:main",
             "bench_seg = arm_benchmarks.bench_seg:main",
             "make_shape_set = arm_benchmarks.shape_set:main",
@@ -27,6 +27,5 @@ setup(
             "bench_robustness = arm_benchmarks.bench_robustness:main",
             "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
             "bench_pushability = arm_benchmarks.pushability:main",
-        ]
-    },
+    ]},
 )

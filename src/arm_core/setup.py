@@ -1,3 +1,4 @@
+
 from setuptools import find_packages, setup
 
 package_name = "arm_core"
@@ -16,5 +17,6 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": [
+    ]},
 )

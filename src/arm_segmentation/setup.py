@@ -1,3 +1,4 @@
+
 from setuptools import find_packages, setup
 
 package_name = "arm_segmentation"
@@ -17,12 +18,10 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={
-        "console_scripts": [
+    entry_points={"console_scripts": [
             "segmentation_node = arm_segmentation.segmentation_node:main",
             "seg_datagen = arm_segmentation.boundary_data:main",
             "seg_train = arm_segmentation.boundary_train:main",
             "seg_merge_train = arm_segmentation.merge_train:main",
-        ]
-    },
+    ]},
 )

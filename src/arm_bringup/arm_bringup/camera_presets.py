@@ -86,6 +86,7 @@ def node_parameters(preset: dict, key: str) -> dict:
     return dict(preset["parameters"].get(key) or {})
 
 
+
 def node_options(preset: dict | None, key: str) -> dict:
     """NodeProcess keyword arguments (params, remaps) of a preset for one graph node; {} without one."""
     if preset is None:
