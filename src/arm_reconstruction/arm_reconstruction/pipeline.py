@@ -185,6 +185,10 @@ def estimate_visible_fraction(parts_world, labels, object_id, K, T_world_camera)
 class Reconstructor:
     """Holds the network and the caches; call it once per frame."""
 
+    # Checked between stages and between objects' convex decompositions: True abandons the frame
+    # (ReconstructionPreempted), e.g. so that a planner that just got a goal has the CPU.
+    should_stop: Callable[[], bool] | None = None
+
     def __init__(self, settings: ReconstructionSettings | None = None, model: torch.nn.Module | None = None):
         self.settings = settings or ReconstructionSettings()
         self.device = resolve_device(self.settings.device)
@@ -213,9 +217,6 @@ class Reconstructor:
         self.k = float(self.settings.k or getattr(model, "grid_k", CHECKPOINT_DEFAULT_K))  # load_checkpoint sets it
         self.decomposer = ConvexDecomposer(self.settings.decomposition)
         self.timer = StageTimer()
-        # Checked between stages and between objects' convex decompositions: True abandons the frame
-        # (ReconstructionPreempted), e.g. so that a planner that just got a goal has the CPU.
-        self.should_stop: Callable[[], bool] | None = None
 
     def _stop_if_asked(self) -> None:
         if self.should_stop is not None and self.should_stop():
