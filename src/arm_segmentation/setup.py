@@ -23,5 +23,6 @@ setup(
             "seg_datagen = arm_segmentation.boundary_data:main",
             "seg_train = arm_segmentation.boundary_train:main",
             "seg_merge_train = arm_segmentation.merge_train:main",
+            "seg_outline_train = arm_segmentation.outline_train:main",
     ]},
 )

@@ -36,6 +36,8 @@ from arm_segmentation.boundary_net import DEFAULT_CHECKPOINT, BoundaryParams
 from arm_segmentation.merge_model import DEFAULT_CHECKPOINT as MERGE_CHECKPOINT
 from arm_segmentation.merge_model import MergeParams
 from arm_segmentation.metrics import segmentation_metrics
+from arm_segmentation.outline_model import DEFAULT_CHECKPOINT as OUTLINE_CHECKPOINT
+from arm_segmentation.outline_model import OutlineParams
 from arm_segmentation.segmentation import SegmentationParams, segment
 from arm_segmentation.visualization import colourise
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
@@ -46,10 +48,12 @@ matplotlib.use("Agg")
 
 WITH_NETWORK = SegmentationParams(boundary=BoundaryParams(enabled=True))
 COLOUR_MERGE = SegmentationParams(merge=MergeParams(enabled=False))
+NO_OUTLINE_PASS = SegmentationParams(outline=OutlineParams(enabled=False))
 METHODS = {
     "arm_default": segment,
     "arm_outline_network": functools.partial(segment, params=WITH_NETWORK),
     "arm_colour_merge": functools.partial(segment, params=COLOUR_MERGE),
+    "arm_colour_outline": functools.partial(segment, params=NO_OUTLINE_PASS),
     "baseline_ransac_dbscan": segment_baseline,
 }
 METRIC_KEYS = (
@@ -114,7 +118,8 @@ def frames_key(args) -> str:
 
 def scores_key(args) -> str:
     """Run key of the per-scene scores: settings, the simulator's, the segmentation's and this package's source."""
-    return run_key(frame_settings(args), checkpoints=[DEFAULT_CHECKPOINT, MERGE_CHECKPOINT], packages=SCORE_PACKAGES)
+    checkpoints = [DEFAULT_CHECKPOINT, MERGE_CHECKPOINT, OUTLINE_CHECKPOINT]
+    return run_key(frame_settings(args), checkpoints=checkpoints, packages=SCORE_PACKAGES)
 
 
 def render_scene(index: int, args, pool):

@@ -7,6 +7,8 @@ the nearest pixels well inside the instance and well outside it (the background 
 sampled from a lightly blurred image.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
 import cv2
@@ -44,26 +46,49 @@ def refine_borders(labels: np.ndarray, rgb: np.ndarray, params: BorderParams = B
     return out
 
 
-def _refine(labels: np.ndarray, rgb: np.ndarray, params: BorderParams) -> np.ndarray:
-    b = params.band_px
-    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * b + 1, 2 * b + 1))
-    fg = (labels > 0).astype(np.uint8)
-    inside = cv2.erode(fg, disk, borderValue=0) > 0
-    outside = cv2.erode(1 - fg, disk, borderValue=0) > 0
-    band = ~inside & ~outside
+@dataclass
+class OutlineBand:
+    """The band pixels (rows, cols) of a label image, each with its nearest pixel well inside an
+    instance (inside_rows, inside_cols) and well outside every instance (outside_rows, outside_cols),
+    and the instance it would join (candidate)."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    inside_rows: np.ndarray
+    inside_cols: np.ndarray
+    outside_rows: np.ndarray
+    outside_cols: np.ndarray
+    candidate: np.ndarray
+
+
+def outline_band(labels: np.ndarray, band_px: int) -> OutlineBand | None:
+    """The pixels within band_px of the outline between the instances and the background (the
+    image border is no outline), or None when there is no instance or no background."""
+    covered = (labels > 0).astype(np.uint8)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band_px + 1, 2 * band_px + 1))
+    inside = cv2.erode(covered, disk, borderValue=1) > 0
+    outside = cv2.erode(1 - covered, disk, borderValue=1) > 0
     if not np.any(inside) or not np.any(outside):
+        return None
+    iy, ix = nearest_pixel(inside)
+    oy, ox = nearest_pixel(outside)
+    rows, cols = np.nonzero(~inside & ~outside)
+    iy, ix, oy, ox = iy[rows, cols], ix[rows, cols], oy[rows, cols], ox[rows, cols]
+    return OutlineBand(rows, cols, iy, ix, oy, ox, labels[iy, ix])
+
+
+def _refine(labels: np.ndarray, rgb: np.ndarray, params: BorderParams) -> np.ndarray:
+    band = outline_band(labels, params.band_px)
+    if band is None:
         return labels
     colour = cv2.blur(rgb, (params.blur_px, params.blur_px)).astype(np.float32) if params.blur_px > 1 else rgb
     colour = np.asarray(colour, dtype=np.float32)
-    iy, ix = nearest_pixel(inside)
-    oy, ox = nearest_pixel(outside)
-    ys, xs = np.nonzero(band)
-    pixel = rgb[ys, xs].astype(np.float32)
-    to_object = np.abs(pixel - colour[iy[ys, xs], ix[ys, xs]]).sum(axis=1)
-    to_background = np.abs(pixel - colour[oy[ys, xs], ox[ys, xs]]).sum(axis=1)
+    pixel = rgb[band.rows, band.cols].astype(np.float32)
+    to_object = np.abs(pixel - colour[band.inside_rows, band.inside_cols]).sum(axis=1)
+    to_background = np.abs(pixel - colour[band.outside_rows, band.outside_cols]).sum(axis=1)
     is_object = to_object + params.margin < to_background
     out = labels.copy()
-    out[ys, xs] = np.where(is_object, labels[iy[ys, xs], ix[ys, xs]], 0)
+    out[band.rows, band.cols] = np.where(is_object, band.candidate, 0)
     return out
 
 

@@ -14,21 +14,16 @@ import argparse
 import json
 import pathlib
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
-from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
 from arm_core.frames import validate_frame
+from arm_segmentation.shards import run_jobs, shard_path
 
 DEFAULT_OUT = pathlib.Path("data/seg_boundary")
 SPLIT_SEED_OFFSET = {"train": 100_000, "test": 200_000}
 PLAIN_EVERY = 5  # every 5th scene is rendered in the plain domain
-
-
-def shard_path(out_dir, split: str, seed: int) -> pathlib.Path:
-    return pathlib.Path(out_dir) / split / f"shard_{seed:06d}.npz"
 
 
 def make_shard(seed: int, split: str, views: int) -> dict[str, np.ndarray]:
@@ -71,18 +66,8 @@ def generate(out_dir, split: str, shards: int, first_seed: int, views: int, work
         for seed in range(first_seed, first_seed + shards)
         if not shard_path(out_dir, split, seed).is_file()
     ]
-    frames, start = 0, time.perf_counter()
-    bar = tqdm(total=len(jobs), desc=f"seg_datagen {split}", unit="shard")
-    if workers <= 1:
-        for job in jobs:
-            frames += _job(job)
-            bar.update(1)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as executor:
-            for future in as_completed([executor.submit(_job, job) for job in jobs]):
-                frames += future.result()
-                bar.update(1)
-    bar.close()
+    start = time.perf_counter()
+    frames = run_jobs(_job, jobs, workers, f"seg_datagen {split}")
     elapsed = time.perf_counter() - start
     return {"shards_made": len(jobs), "frames_made": frames, "seconds": round(elapsed, 1)}
 

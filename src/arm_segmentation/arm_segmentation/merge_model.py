@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_segmentation.clustering import hue_distance, widest_disc_m
+from arm_segmentation.perceptron import Perceptron, shared_perceptron
 
 CHECKPOINT_DIR = pathlib.Path(__file__).resolve().parent / "checkpoints"
 DEFAULT_CHECKPOINT = CHECKPOINT_DIR / "merge.npz"
@@ -124,38 +125,11 @@ class MergeParams:
     checkpoint: str = ""
 
 
-class MergeClassifier:
-    """A two-layer perceptron over standardised region-pair features, in numpy."""
+class MergeClassifier(Perceptron):
+    """The merge perceptron over region-pair features (FEATURE_NAMES), in numpy."""
 
     def __init__(self, checkpoint: str | pathlib.Path = ""):
-        path = pathlib.Path(checkpoint) if checkpoint else DEFAULT_CHECKPOINT
-        if not path.is_file():
-            raise FileNotFoundError(f"merge classifier weights not found: {path}")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                names = tuple(str(name) for name in data["feature_names"])
-                self.mean, self.scale = data["mean"], data["scale"]
-                self.layers = [(data[f"w{k}"], data[f"b{k}"]) for k in range(int(data["n_layers"]))]
-        except (KeyError, ValueError, OSError) as error:
-            raise ValueError(f"{path} is not merge classifier weights ({type(error).__name__}: {error})") from error
-        if names != FEATURE_NAMES:
-            raise ValueError(f"{path} was trained on other features: {names}")
-        self.path = path
-
-    def probability(self, features: np.ndarray) -> np.ndarray:
-        """(P,) probability that each region pair is one object."""
-        return perceptron_probability(features, self.mean, self.scale, self.layers)
-
-
-def perceptron_probability(features, mean, scale, layers) -> np.ndarray:
-    """(P,) sigmoid output of the perceptron `layers` [(weights, bias), ...] (ReLU between them) on
-    features standardised by mean and scale."""
-    x = (np.asarray(features, dtype=np.float32) - mean) / scale
-    for k, (w, b) in enumerate(layers):
-        x = x @ w + b
-        if k < len(layers) - 1:
-            x = np.maximum(x, 0.0)
-    return 1.0 / (1.0 + np.exp(-np.clip(x[:, 0], -30.0, 30.0)))
+        super().__init__(checkpoint or DEFAULT_CHECKPOINT, FEATURE_NAMES, "merge classifier")
 
 
 def _sums_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -225,21 +199,7 @@ class LearnedMerge:
         return np.where(self.standing_apart(regions, pairs, features), 0.0, probability)
 
 
-_CLASSIFIERS: dict[str, MergeClassifier | None] = {}
-
-
 def shared_classifier(params: MergeParams) -> MergeClassifier | None:
-    """The classifier for params (loaded once, then shared), or None when disabled or when the
-    shipped weights are missing. Named weights that are missing raise FileNotFoundError; a file
-    that is not merge classifier weights raises ValueError."""
-    if not params.enabled:
-        return None
-    key = params.checkpoint or str(DEFAULT_CHECKPOINT)
-    if key not in _CLASSIFIERS:
-        try:
-            _CLASSIFIERS[key] = MergeClassifier(params.checkpoint)
-        except FileNotFoundError:
-            if params.checkpoint:
-                raise
-            _CLASSIFIERS[key] = None
-    return _CLASSIFIERS[key]
+    """The classifier for params (perceptron.shared_perceptron), or None when disabled or when the
+    shipped weights are missing."""
+    return shared_perceptron(MergeClassifier, params.enabled, params.checkpoint, DEFAULT_CHECKPOINT)

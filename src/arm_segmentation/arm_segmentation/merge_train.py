@@ -19,19 +19,13 @@ import json
 import pathlib
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
-from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
-from arm_segmentation.merge_model import (
-    DEFAULT_CHECKPOINT,
-    FEATURE_NAMES,
-    LearnedMerge,
-    MergeClassifier,
-    perceptron_probability,
-)
+from arm_segmentation.merge_model import DEFAULT_CHECKPOINT, FEATURE_NAMES, LearnedMerge, MergeClassifier
+from arm_segmentation.perceptron import fit_perceptron, perceptron_probability, save_perceptron
+from arm_segmentation.shards import run_jobs, shard_path
 
 DEFAULT_DATA = pathlib.Path("data/seg_merge")
 SPLIT_SEED_OFFSET = {"train": 300_000, "test": 400_000}
@@ -103,10 +97,6 @@ def make_shard(seed: int, split: str, views: int, policy: str = "", geometric_me
     }
 
 
-def _shard_path(data_dir, split: str, seed: int) -> pathlib.Path:
-    return pathlib.Path(data_dir) / split / f"shard_{seed:06d}.npz"
-
-
 def policy_dir(data_dir, policy: str) -> pathlib.Path:
     """Where the shards made with the classifier `policy` deciding go (keyed to its weights)."""
     digest = hashlib.sha256(pathlib.Path(policy).read_bytes()).hexdigest()[:10]
@@ -121,57 +111,23 @@ def _job(job: dict) -> int:
 
 def generate(data_dir, split: str, shards: int, views: int, workers: int, policy: str = "", geometric=True) -> int:
     """Make the missing shards 0 .. shards - 1 of split; returns the number made."""
-    paths = {seed: _shard_path(data_dir, split, seed) for seed in range(shards)}
+    paths = {seed: shard_path(data_dir, split, seed) for seed in range(shards)}
     jobs = [
         {"seed": s, "split": split, "views": views, "policy": policy, "geometric_merge": geometric, "path": str(p)}
         for s, p in paths.items()
         if not p.is_file()
     ]
-    bar = tqdm(total=len(jobs), desc=f"seg_merge_train shards ({split})", unit="shard")
-    if workers <= 1:
-        for job in jobs:
-            _job(job)
-            bar.update(1)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as executor:
-            for future in as_completed([executor.submit(_job, job) for job in jobs]):
-                future.result()
-                bar.update(1)
-    bar.close()
+    run_jobs(_job, jobs, workers, f"seg_merge_train shards ({split})")
     return len(jobs)
 
 
 def load_split(data_dirs, split: str, shards: int):
     """(features, same, weight) of shards 0 .. shards - 1 of split in each of data_dirs."""
-    parts = [np.load(_shard_path(d, split, seed)) for d in data_dirs for seed in range(shards)]
+    parts = [np.load(shard_path(d, split, seed)) for d in data_dirs for seed in range(shards)]
     features = np.concatenate([p["features"] for p in parts])
     same = np.concatenate([p["same"] for p in parts]).astype(np.float32)
     weight = np.sqrt(np.concatenate([p["smaller_px"] for p in parts]))
     return features, same, weight / max(float(weight.mean()), 1e-6)
-
-
-def train(features, same, weight, hidden: int, steps: int, seed: int):
-    """(mean, scale, layers) of a perceptron with two hidden layers trained by Adam on full batches."""
-    import torch
-
-    torch.manual_seed(seed)
-    mean = features.mean(axis=0)
-    scale = np.maximum(features.std(axis=0), 1e-3)
-    x = torch.from_numpy((features - mean) / scale)
-    y, w = torch.from_numpy(same), torch.from_numpy(weight.astype(np.float32))
-    model = torch.nn.Sequential(
-        torch.nn.Linear(x.shape[1], hidden), torch.nn.ReLU(), torch.nn.Linear(hidden, hidden), torch.nn.ReLU(),
-        torch.nn.Linear(hidden, 1),
-    )  # fmt: skip
-    optimiser = torch.optim.Adam(model.parameters(), lr=3e-3, weight_decay=1e-5)
-    for _ in tqdm(range(steps), desc="seg_merge_train fit", unit="step"):
-        optimiser.zero_grad()
-        loss = torch.nn.functional.binary_cross_entropy_with_logits(model(x)[:, 0], y, weight=w)
-        loss.backward()
-        optimiser.step()
-    linear = [m for m in model if isinstance(m, torch.nn.Linear)]
-    layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()) for m in linear]
-    return mean.astype(np.float32), scale.astype(np.float32), layers
 
 
 def accuracy(classifier_layers, mean, scale, features, same, weight) -> dict:
@@ -195,12 +151,7 @@ def accuracy(classifier_layers, mean, scale, features, same, weight) -> dict:
 
 
 def save(path: pathlib.Path, mean, scale, layers, card: dict) -> None:
-    arrays = {"feature_names": np.array(FEATURE_NAMES), "mean": mean, "scale": scale, "n_layers": np.array(len(layers))}
-    for k, (w, b) in enumerate(layers):
-        arrays[f"w{k}"], arrays[f"b{k}"] = w.astype(np.float32), b.astype(np.float32)
-    atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
-    lines = ["# Merge classifier (seg_merge_train)", "", "```json", json.dumps(card, indent=2), "```", ""]
-    atomic_write(path.with_suffix(".md"), lambda tmp: pathlib.Path(tmp).write_text("\n".join(lines)))
+    save_perceptron(path, FEATURE_NAMES, mean, scale, layers, "Merge classifier (seg_merge_train)", card)
 
 
 def main(argv=None) -> int:
@@ -231,7 +182,8 @@ def main(argv=None) -> int:
         made += generate(data_dir, "train", args.train_shards, args.views, args.workers, policy, geometric)
         made += generate(data_dir, "test", args.test_shards, args.views, args.workers, policy, geometric)
     features, same, weight = load_split(data_dirs, "train", args.train_shards)
-    mean, scale, layers = train(features, same, weight, args.hidden, args.steps, args.seed)
+    fit = fit_perceptron(features, same, weight, args.hidden, args.steps, args.seed, desc="seg_merge_train fit")
+    mean, scale, layers = fit
     card = {
         "command": "seg_merge_train " + " ".join(sys.argv[1:] if argv is None else argv),
         "features": list(FEATURE_NAMES),

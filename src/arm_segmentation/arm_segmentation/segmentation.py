@@ -17,6 +17,7 @@ from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_ins
 from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.merge_model import LearnedMerge, MergeParams, pixel_statistics, shared_classifier
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
+from arm_segmentation.outline_model import OutlineParams, refine_outline, shared_outline_classifier
 from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample, upsample_linear
 from arm_segmentation.table_plane import (
     SupportLevel,
@@ -88,6 +89,7 @@ class SegmentationParams:
     border: BorderParams = field(default_factory=BorderParams)
     boundary: BoundaryParams = field(default_factory=BoundaryParams)
     merge: MergeParams = field(default_factory=MergeParams)
+    outline: OutlineParams = field(default_factory=OutlineParams)
 
 
 @dataclass
@@ -95,6 +97,8 @@ class SegmentationResult:
     labels: np.ndarray  # uint16 HxW, 0 = table / background, k > 0 = instance k
     table_mask: np.ndarray  # bool HxW
     levels: list[SupportLevel]
+    # HxW float32 object probability of the boundary network at full resolution (None without it)
+    objectness: np.ndarray | None = None
 
 
 def local_table_chroma(chroma: np.ndarray, table: np.ndarray, window_px: int) -> np.ndarray:
@@ -353,13 +357,18 @@ def segment_detailed(
         occluders = upsample(occluders, stride, depth_full.shape)
         add = (labels == 0) & (occluders > 0)
         labels[add] = (occluders[add] + int(labels.max())).astype(np.uint16)
-    if maps is not None and params.boundary.fill_objects:
+    outline_classifier = shared_outline_classifier(params.outline)
+    objectness = None
+    if maps is not None and (params.boundary.fill_objects or outline_classifier is not None):
         inside = in_workspace(stage.points_world, params)
         objectness = upsample_linear(maps[1] if inside is None else maps[1] * inside, stride, depth_full.shape)
+    if objectness is not None and params.boundary.fill_objects:
         labels = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
+    if objectness is not None and outline_classifier is not None:
+        labels = refine_outline(labels, rgb_full, depth_full, objectness, outline_classifier, params.outline)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
-    return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels)
+    return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels, objectness=objectness)
 
 
 def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int = 0) -> np.ndarray:

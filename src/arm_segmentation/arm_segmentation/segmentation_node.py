@@ -27,6 +27,7 @@ from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
 from arm_segmentation.merge_model import MergeParams, shared_classifier
+from arm_segmentation.outline_model import OutlineParams, shared_outline_classifier
 from arm_segmentation.pose_tracking import CameraPoseTracker
 from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.self_filter import SelfFilterParams, arm_positions, base_pose, self_mask
@@ -131,9 +132,18 @@ class SegmentationNode(Node):
             raise ValueError(f"merge_checkpoint: {error}") from error
         if classifier is not None and predictor is None:
             self.get_logger().warning("merge classifier needs the boundary network's maps: merging by colour")
+        outline = OutlineParams(
+            enabled=declare(self, "outline_classifier", True, "Decide outline pixels by the learned classifier"),
+            checkpoint=declare(self, "outline_checkpoint", "", "Outline classifier weights ('' = the shipped ones)"),
+        )
+        try:
+            shared_outline_classifier(outline)
+        except (FileNotFoundError, ValueError) as error:
+            raise ValueError(f"outline_checkpoint: {error}") from error
         self.params = SegmentationParams(
             boundary=boundary,
             merge=merge,
+            outline=outline,
             working_stride=stride,
             workspace_min_m=tuple(float(v) for v in workspace_min),
             workspace_max_m=tuple(float(v) for v in workspace_max),
