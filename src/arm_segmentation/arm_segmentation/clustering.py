@@ -21,6 +21,8 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from arm_segmentation.label_stats import label_maximum, label_minimum
+
 
 @dataclass(frozen=True)
 class ClusterParams:
@@ -308,7 +310,7 @@ def widest_disc_m(labels: np.ndarray, n: int, area_m2: np.ndarray) -> np.ndarray
     inner[:, :-1] &= labels[:, :-1] == labels[:, 1:]
     inner[:, 1:] &= labels[:, 1:] == labels[:, :-1]
     radius_m = cv2.distanceTransform(inner, cv2.DIST_L2, 3) * np.sqrt(area_m2)
-    return np.asarray(ndimage.maximum(radius_m, labels, np.arange(n + 1)), dtype=np.float64)
+    return label_maximum(radius_m, labels, n)
 
 
 def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, outline=None) -> np.ndarray:
@@ -324,7 +326,7 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
     join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.geometric_contact_share * total)
     if outline is not None:
         join &= contact_outline(counts) <= params.outline_separate
-    low = ndimage.minimum(np.where(smooth, height_m, np.inf), labels, np.arange(n + 1))
+    low = label_minimum(np.where(smooth, height_m, np.inf), labels, n)
     floating = np.asarray(low) > params.resting_height_m
     thin = widest_disc_m(labels, n, area_m2) < params.thick_fragment_m
     alone = floating | thin

@@ -68,28 +68,44 @@ class OutlineParams:
     checkpoint: str = ""
 
 
-def outline_features(labels, rgb, depth_m, objectness, band: OutlineBand, blur_px: int) -> np.ndarray:
-    """(P, len(FEATURE_NAMES)) float32 features of the band's pixels. labels: HxW instances; rgb:
-    HxWx3 uint8; depth_m: HxW metres (0 = no return); objectness: HxW object probability of the
-    boundary network at full resolution."""
+@dataclass
+class OutlineImage:
+    """What the features read from one frame (or crop), computed once for all passes: rgb (HxWx3
+    uint8), colour (HxWx3 float32 in 0-1, box-blurred by blur_px), gradient (HxW float32, Sobel
+    magnitude of the lightly smoothed grey image), depth_m (HxW float32 metres, 0 = no return),
+    objectness (HxW float32, the boundary network's object probability at full resolution)."""
+
+    rgb: np.ndarray
+    colour: np.ndarray
+    gradient: np.ndarray
+    depth_m: np.ndarray
+    objectness: np.ndarray
+
+
+def outline_image(rgb, depth_m, objectness, blur_px: int) -> OutlineImage:
+    colour = np.asarray(cv2.blur(rgb, (blur_px, blur_px)) if blur_px > 1 else rgb, np.float32) / 255.0
+    grey = cv2.GaussianBlur(np.asarray(rgb, np.float32).mean(axis=2) / 255.0, (3, 3), 0)
+    gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1))
+    depth = np.asarray(depth_m, np.float32)
+    return OutlineImage(np.asarray(rgb), colour, gradient, depth, np.asarray(objectness, np.float32))
+
+
+def outline_features(labels: np.ndarray, image: OutlineImage, band: OutlineBand) -> np.ndarray:
+    """(P, len(FEATURE_NAMES)) float32 features of the band's pixels of the HxW instance labels."""
     r, c = band.rows, band.cols
     ir, ic, orow, ocol = band.inside_rows, band.inside_cols, band.outside_rows, band.outside_cols
-    colour = np.asarray(cv2.blur(rgb, (blur_px, blur_px)) if blur_px > 1 else rgb, np.float32) / 255.0
-    pixel = np.asarray(rgb[r, c], np.float32) / 255.0
-    inside, outside, blurred = colour[ir, ic], colour[orow, ocol], colour[r, c]
+    pixel = np.asarray(image.rgb[r, c], np.float32) / 255.0
+    inside, outside, blurred = image.colour[ir, ic], image.colour[orow, ocol], image.colour[r, c]
     covered = (labels > 0).astype(np.uint8)
     signed = cv2.distanceTransform(covered, cv2.DIST_L2, 3)[r, c] - cv2.distanceTransform(
         1 - covered, cv2.DIST_L2, 3
     )[r, c]
-    depth = np.asarray(depth_m, np.float32)
-    d, d_in, d_out = depth[r, c], depth[ir, ic], depth[orow, ocol]
+    d, d_in, d_out = image.depth_m[r, c], image.depth_m[ir, ic], image.depth_m[orow, ocol]
     has, has_in, has_out = d > 0, d_in > 0, d_out > 0
 
     def depth_step(a, b, known):
         return np.where(known, np.clip(a - b, -DEPTH_CLIP_M, DEPTH_CLIP_M) / DEPTH_CLIP_M, 0.0)
 
-    grey = cv2.GaussianBlur(np.asarray(rgb, np.float32).mean(axis=2) / 255.0, (3, 3), 0)
-    gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1))[r, c]
     share = cv2.blur(covered.astype(np.float32), (5, 5))[r, c]
     columns = [
         pixel,
@@ -106,9 +122,9 @@ def outline_features(labels, rgb, depth_m, objectness, band: OutlineBand, blur_p
         depth_step(d, d_in, has & has_in),
         depth_step(d, d_out, has & has_out),
         depth_step(d_in, d_out, has_in & has_out),
-        gradient,
+        image.gradient[r, c],
         share,
-        np.asarray(objectness, np.float32)[r, c],
+        image.objectness[r, c],
     ]
     return np.concatenate([np.asarray(x, np.float32).reshape(len(r), -1) for x in columns], axis=1)
 
@@ -129,11 +145,12 @@ def refine_outline(labels, rgb, depth_m, objectness, classifier: OutlineClassifi
     m = 4 * params.band_px + 4
     box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     crop = labels[box]
+    image = outline_image(rgb[box], depth_m[box], objectness[box], params.blur_px)
     for _ in range(params.iterations):
         band = outline_band(crop, params.band_px)
         if band is None:
             break
-        features = outline_features(crop, rgb[box], depth_m[box], objectness[box], band, params.blur_px)
+        features = outline_features(crop, image, band)
         is_object = classifier.probability(features) > params.threshold
         crop = crop.copy()
         crop[band.rows, band.cols] = np.where(is_object, band.candidate, 0)

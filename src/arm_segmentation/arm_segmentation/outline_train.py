@@ -25,7 +25,13 @@ import numpy as np
 from arm_core.atomic_io import atomic_write
 from arm_core.frames import validate_frame
 from arm_segmentation.boundary import OutlineBand, outline_band
-from arm_segmentation.outline_model import DEFAULT_CHECKPOINT, FEATURE_NAMES, OutlineParams, outline_features
+from arm_segmentation.outline_model import (
+    DEFAULT_CHECKPOINT,
+    FEATURE_NAMES,
+    OutlineParams,
+    outline_features,
+    outline_image,
+)
 from arm_segmentation.perceptron import fit_perceptron, perceptron_probability, save_perceptron
 from arm_segmentation.shards import run_jobs, shard_path
 
@@ -66,9 +72,8 @@ def make_shard(seed: int, split: str, views: int) -> dict[str, np.ndarray]:
             if band is None or result.objectness is None:
                 continue
             depth = validate_frame(frame.depth_m, frame.K, frame.T_world_camera, rgb=frame.rgb).depth_m
-            features.append(
-                outline_features(result.labels, frame.rgb, depth, result.objectness, band, pass_params.blur_px)
-            )
+            image = outline_image(frame.rgb, depth, result.objectness, pass_params.blur_px)
+            features.append(outline_features(result.labels, image, band))
             truth.append(belongs(result.labels, frame.labels, band))
     return {"features": np.concatenate(features).astype(np.float16), "belongs": np.concatenate(truth)}
 

@@ -16,7 +16,6 @@ from tqdm import tqdm
 
 from arm_core.atomic_io import atomic_write
 
-
 # Rows per matrix product: small enough that OpenBLAS keeps each product on the calling thread. Its
 # worker threads, once woken, spin for a while after the product and took about 130 ms of CPU per
 # frame from the rest of the segmentation (a 5,000-pixel outline pass) on a 2-core machine.

@@ -15,6 +15,7 @@ from arm_segmentation.boundary import BorderParams, grow_into_objectness, neares
 from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
+from arm_segmentation.label_stats import label_maximum
 from arm_segmentation.merge_model import LearnedMerge, MergeParams, pixel_statistics, shared_classifier
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
 from arm_segmentation.outline_model import OutlineParams, refine_outline, shared_outline_classifier
@@ -452,8 +453,7 @@ def drop_support_structure(labels, points_world, depth_m, support, levels, param
     z = points_world[..., 2]
     has = (labels > 0) & (depth_m > 0)
     band = band_for_depth(depth_m, params)
-    ids = np.arange(1, n + 1)
-    support_of = ndimage.maximum(np.nan_to_num(support, nan=-np.inf), labels, ids)
+    support_of = label_maximum(np.nan_to_num(support, nan=-np.inf), labels, n)[1:]
     drop = np.zeros(n + 1, dtype=bool)
     for level in levels:
         near_top = has & (np.abs(z - level.height_m) <= 2 * band)

@@ -9,6 +9,7 @@ from arm_segmentation.outline_model import (
     OutlineClassifier,
     OutlineParams,
     outline_features,
+    outline_image,
     refine_outline,
     shared_outline_classifier,
 )
@@ -51,7 +52,7 @@ def test_features_have_one_finite_column_per_name():
     rgb, depth, objectness, disc = _disc_scene()
     labels = disc.astype(np.uint16)
     band = outline_band(labels, 2)
-    features = outline_features(labels, rgb, depth, objectness, band, blur_px=3)
+    features = outline_features(labels, outline_image(rgb, depth, objectness, blur_px=3), band)
     assert features.shape == (len(band.rows), len(FEATURE_NAMES)) and np.all(np.isfinite(features))
     signed = features[:, FEATURE_NAMES.index("signed_distance_px")]
     covered = labels[band.rows, band.cols] > 0
