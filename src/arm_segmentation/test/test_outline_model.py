@@ -83,15 +83,6 @@ def test_belongs_is_the_true_object_the_candidate_mostly_covers():
     assert not np.any(belongs(labels, np.zeros_like(truth), band))
 
 
-def test_classifier_weights_errors(tmp_path):
-    (tmp_path / "junk.npz").write_bytes(b"not weights")
-    with pytest.raises(ValueError, match="not outline classifier weights"):
-        OutlineClassifier(tmp_path / "junk.npz")
-    with pytest.raises(FileNotFoundError):
-        shared_outline_classifier(OutlineParams(checkpoint=str(tmp_path / "missing.npz")))
-    assert shared_outline_classifier(OutlineParams(enabled=False)) is None
-
-
 def test_seg_outline_train_makes_shards_trains_and_resumes(tmp_path):
     from arm_segmentation.outline_train import main
 
