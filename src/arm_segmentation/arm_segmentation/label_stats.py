@@ -15,7 +15,8 @@ def label_maximum(values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     keep = flat <= n
     flat, v = flat[keep], v[keep]
     out = np.full(n + 1, -np.inf)
-    np.maximum.at(out, flat, v)
+    with np.errstate(invalid="ignore"):  # NaN values propagate, as in scipy
+        np.maximum.at(out, flat, v)
     return np.where(_present(flat, n), out, 0.0)
 
 
