@@ -137,9 +137,11 @@ class SegmentationNode(Node):
             checkpoint=declare(self, "outline_checkpoint", "", "Outline classifier weights ('' = the shipped ones)"),
         )
         try:
-            shared_outline_classifier(outline)
+            outline_classifier = shared_outline_classifier(outline)
         except (FileNotFoundError, ValueError) as error:
             raise ValueError(f"outline_checkpoint: {error}") from error
+        if outline_classifier is not None and predictor is None:
+            self.get_logger().warning("outline classifier needs the boundary network's maps: outlines by colour")
         self.params = SegmentationParams(
             boundary=boundary,
             merge=merge,
