@@ -34,13 +34,22 @@ def nearest_pixel(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ys[index - 1], xs[index - 1]
 
 
+def instances_box(labels: np.ndarray, margin_px: int) -> tuple[slice, slice] | None:
+    """(rows, cols) slices of the instances' bounding box grown by margin_px (clipped to the
+    image), or None without instances."""
+    ys, xs = np.nonzero(labels)
+    if len(ys) == 0:
+        return None
+    m, (height, width) = margin_px, labels.shape
+    rows = slice(max(int(ys.min()) - m, 0), min(int(ys.max()) + m + 1, height))
+    return rows, slice(max(int(xs.min()) - m, 0), min(int(xs.max()) + m + 1, width))
+
+
 def refine_borders(labels: np.ndarray, rgb: np.ndarray, params: BorderParams = BorderParams()) -> np.ndarray:
     """uint16 labels with the pixels near the instances' outlines reassigned by colour."""
-    ys, xs = np.nonzero(labels)
-    if params.band_px <= 0 or len(ys) == 0:
+    box = instances_box(labels, 3 * params.band_px + 2)
+    if params.band_px <= 0 or box is None:
         return labels
-    m = 3 * params.band_px + 2
-    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     out = labels.copy()
     out[box] = _refine(labels[box], rgb[box], params)
     return out
@@ -97,11 +106,9 @@ def grow_into_objectness(labels: np.ndarray, objectness: np.ndarray, threshold: 
     network's object channel at full resolution) exceeds threshold and that lie within reach_px of
     an instance given to the nearest instance: flat bases in the table band and surfaces without
     depth that geometry leaves out."""
-    ys, xs = np.nonzero(labels)
-    if len(ys) == 0 or reach_px <= 0:
+    box = instances_box(labels, reach_px + 1)
+    if box is None or reach_px <= 0:
         return labels
-    m = reach_px + 1
-    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     crop = labels[box]
     free = crop == 0
     distance = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)

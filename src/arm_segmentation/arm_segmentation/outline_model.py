@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from arm_segmentation.boundary import OutlineBand, outline_band
+from arm_segmentation.boundary import OutlineBand, instances_box, outline_band
 from arm_segmentation.perceptron import Perceptron, shared_perceptron
 
 CHECKPOINT_DIR = pathlib.Path(__file__).resolve().parent / "checkpoints"
@@ -139,11 +139,9 @@ class OutlineClassifier(Perceptron):
 def refine_outline(labels, rgb, depth_m, objectness, classifier: OutlineClassifier, params: OutlineParams):
     """uint16 labels with the pixels near the instances' outlines given to the nearest instance
     where the classifier says they are its object, and to the background elsewhere."""
-    ys, xs = np.nonzero(labels)
-    if len(ys) == 0:
+    box = instances_box(labels, 4 * params.band_px + 4)
+    if box is None:
         return labels
-    m = 4 * params.band_px + 4
-    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     crop = labels[box]
     image = outline_image(rgb[box], depth_m[box], objectness[box], params.blur_px)
     for _ in range(params.iterations):

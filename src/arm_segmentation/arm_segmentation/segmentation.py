@@ -11,7 +11,13 @@ from scipy import ndimage
 
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
-from arm_segmentation.boundary import BorderParams, grow_into_objectness, nearest_pixel, refine_borders
+from arm_segmentation.boundary import (
+    BorderParams,
+    grow_into_objectness,
+    instances_box,
+    nearest_pixel,
+    refine_borders,
+)
 from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.geometry import preprocess_depth
@@ -376,11 +382,9 @@ def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int
     """Labels with the pixels without depth that the instances enclose (dropout blobs on dark and
     shiny objects), or that their closing by a disc of radius close_px covers, given to the
     nearest instance."""
-    ys, xs = np.nonzero(labels)
-    if len(ys) == 0:
+    box = instances_box(labels, close_px + 1)
+    if box is None:
         return labels
-    m = close_px + 1
-    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     crop = labels[box]
     inside = ndimage.binary_fill_holes(crop > 0)
     if close_px > 0:
@@ -403,11 +407,9 @@ def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, rgb: np.ndarray, c
     depth inside the closing (radius close_px) of an instance's pixels with depth are holes and
     gaps of the object and stay; outside it they stay only where their chromaticity is nearer to
     the instance's mean than to the mean of the unlabelled pixels with depth within window_px."""
-    ys, xs = np.nonzero(labels)
-    if close_px <= 0 or len(ys) == 0:
+    box = instances_box(labels, window_px + close_px)
+    if close_px <= 0 or box is None:
         return labels
-    m = window_px + close_px
-    box = slice(max(ys.min() - m, 0), ys.max() + m + 1), slice(max(xs.min() - m, 0), xs.max() + m + 1)
     out = labels.copy()
     out[box] = _trim_rim(labels[box], depth_m[box], rgb[box], close_px, window_px)
     return out

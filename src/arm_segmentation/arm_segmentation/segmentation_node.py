@@ -126,22 +126,12 @@ class SegmentationNode(Node):
             threshold=declare(self, "merge_threshold", 0.5, "Probability above which fragments merge", 0.05, 0.95),
             checkpoint=declare(self, "merge_checkpoint", "", "Merge classifier weights ('' = the shipped ones)"),
         )
-        try:
-            classifier = shared_classifier(merge)
-        except (FileNotFoundError, ValueError) as error:
-            raise ValueError(f"merge_checkpoint: {error}") from error
-        if classifier is not None and predictor is None:
-            self.get_logger().warning("merge classifier needs the boundary network's maps: merging by colour")
+        self._load_classifier(shared_classifier, merge, "merge", "merging by colour", predictor)
         outline = OutlineParams(
             enabled=declare(self, "outline_classifier", True, "Decide outline pixels by the learned classifier"),
             checkpoint=declare(self, "outline_checkpoint", "", "Outline classifier weights ('' = the shipped ones)"),
         )
-        try:
-            outline_classifier = shared_outline_classifier(outline)
-        except (FileNotFoundError, ValueError) as error:
-            raise ValueError(f"outline_checkpoint: {error}") from error
-        if outline_classifier is not None and predictor is None:
-            self.get_logger().warning("outline classifier needs the boundary network's maps: outlines by colour")
+        self._load_classifier(shared_outline_classifier, outline, "outline", "outlines by colour", predictor)
         self.params = SegmentationParams(
             boundary=boundary,
             merge=merge,
@@ -178,6 +168,16 @@ class SegmentationNode(Node):
         self.get_logger().info(
             f"segmentation_node ready ({mode}, camera pose from {pose_source}, sync tolerance {slop_s * 1e3:.0f} ms)"
         )
+
+    def _load_classifier(self, shared, params, name: str, fallback: str, predictor) -> None:
+        """Load a learned classifier now, so a bad `<name>_checkpoint` fails at start with one clear
+        line, not per frame; warn when it will not run for want of the boundary network's maps."""
+        try:
+            classifier = shared(params)
+        except (FileNotFoundError, ValueError) as error:
+            raise ValueError(f"{name}_checkpoint: {error}") from error
+        if classifier is not None and predictor is None:
+            self.get_logger().warning(f"{name} classifier needs the boundary network's maps: {fallback}")
 
     def _declare_self_filter(self) -> None:
         self.self_filter = declare(
