@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from arm_planner.finger_clearance import OpenFingers
 from arm_planner.kinematics import BodyKinematics
 from arm_planner.mppi import (
     STATE_SPEC,
@@ -125,6 +126,9 @@ class PlannerConfig:
     carry_hand_speed_m_s: float = 0.2
     # Rearrange: close the fingers along the carry direction when the object fits (GraspReward).
     carry_closing_along: bool = True
+    # Grasp and rearrange: turn the closing axis where a finger would land on another object
+    # (finger_clearance; needs the robot spec's finger sizes).
+    clear_fingers: bool = True
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
@@ -270,6 +274,7 @@ class Planner:
                 close_steps=self.config.close_steps,
                 carry_height_m=carry,
                 finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
+                fingers=self._open_fingers() if self.config.clear_fingers else None,
             )
         elif request.task == TASK_PUSH:
             joint = int(self.model.body_jntadr[target_id])
@@ -303,6 +308,16 @@ class Planner:
         if request.resume_state:
             reward.resume(request.resume_state, request.resume_steps_in_state)
         return reward
+
+    def _open_fingers(self) -> OpenFingers:
+        spec = self.robot.spec
+        return OpenFingers(
+            spec.finger_gap_open_m,
+            spec.finger_thickness_m,
+            spec.finger_width_m,
+            spec.fingertip_to_palm_m,
+            spec.tcp_above_fingertip_m,
+        )
 
     def tcp_jacobian(self, data: mujoco.MjData) -> np.ndarray:
         """[6, arm joints]: the TCP's linear (m/s) then angular (rad/s) velocity per arm joint rate."""

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from arm_planner.finger_clearance import OpenFingers, clear_closing_axis
 from arm_planner.kinematics import BodyKinematics
 
 TASK_GRASP = "grasp"
@@ -38,6 +39,8 @@ class TargetGeometry:
     R_world_target: np.ndarray = field(default_factory=lambda: np.eye(3))
     # Vertices of the other objects in the twin at planning start, world frame (metres).
     obstacle_vertices_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    # Their convex parts as [F, 4] half-spaces (finger_clearance.halfspaces), world frame.
+    obstacle_halfspaces: list = field(default_factory=list)
 
     def vertices_in_target(self) -> np.ndarray:
         """Vertices relative to the centre of mass, in the target body's frame (metres)."""
@@ -199,6 +202,10 @@ class GraspReward(TaskReward):
     # the object's inertia pushes on a finger, across it, it swings about the grip.
     finger_gap_open_m: float = 0.0
     carry_closing_margin_m: float = 0.01
+    # The open fingers (None: unknown). A closing axis that would land a finger on another object is
+    # turned, as little as it takes, to one where both fingers come down clear of it and the object
+    # fits between them with carry_closing_margin_m each side (finger_clearance).
+    fingers: OpenFingers | None = None
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
@@ -219,6 +226,15 @@ class GraspReward(TaskReward):
             carry /= np.linalg.norm(carry) + 1e-9
             if np.ptp(_offsets_along(g, carry[:2])) + 2 * self.carry_closing_margin_m <= self.finger_gap_open_m:
                 self.closing_axis = carry
+        if self.fingers is not None:
+            gap = self.fingers.gap_m - 2 * self.carry_closing_margin_m
+            self.closing_axis = clear_closing_axis(
+                self.grasp_point,
+                self.closing_axis,
+                self.fingers,
+                g.obstacle_halfspaces,
+                fits=lambda axis_xy: np.ptp(_offsets_along(g, axis_xy)) <= gap,
+            )
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)

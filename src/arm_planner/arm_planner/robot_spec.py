@@ -19,7 +19,9 @@ class RobotSpec:
     `trajectory_actuators` order (the gripper included).
     finger_gap_open_m / fingertip_to_palm_m / tcp_above_fingertip_m: the open fingers' inner gap, their
     length below the palm and the TCP's height above their tips (metres); with a gap of 0 the planner
-    pushes with one finger only (no caging push).
+    pushes with one finger only (no caging push). finger_thickness_m / finger_width_m: each finger's
+    size along and across the closing axis (metres); with 0 the planner does not turn the closing
+    axis to keep the fingers off neighbouring objects.
     """
 
     arm_joints: tuple[str, ...]
@@ -34,6 +36,8 @@ class RobotSpec:
     finger_gap_open_m: float = 0.0
     fingertip_to_palm_m: float = 0.0
     tcp_above_fingertip_m: float = 0.0
+    finger_thickness_m: float = 0.0
+    finger_width_m: float = 0.0
 
     def resolve(self, model: mujoco.MjModel) -> ResolvedRobot:
         return ResolvedRobot(model, self)

@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 import trimesh
 
+from arm_planner.finger_clearance import halfspaces
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.rewards import TargetGeometry
 from arm_planner.robot_spec import RobotSpec
@@ -105,6 +106,8 @@ def panda_robot_spec() -> RobotSpec:
         finger_gap_open_m=float(sim_robot.FINGER_GAP_OPEN_M),
         fingertip_to_palm_m=float(sim_robot.FINGERTIP_TO_PALM_M),
         tcp_above_fingertip_m=float(sim_robot.TCP_ABOVE_FINGERTIP_M),
+        finger_thickness_m=2 * float(sim_robot.FINGER_HALF_SIZE_M[1]),
+        finger_width_m=2 * float(sim_robot.FINGER_HALF_SIZE_M[0]),
     )
 
 
@@ -210,6 +213,7 @@ class Twin:
         self.body_names = {obj.id: object_body_name(i) for i, obj in enumerate(self.objects)}
         self.signature = geometry_signature(objects, table_height_m)
         self._data = mujoco.MjData(self.model)
+        self._part_halfspaces: list[list[np.ndarray]] | None = None
 
     def __contains__(self, object_id: int) -> bool:
         return object_id in self.body_names
@@ -224,17 +228,29 @@ class Twin:
             vertices = vertices[np.linspace(0, len(vertices) - 1, MAX_GEOMETRY_VERTICES).astype(int)]
         return vertices @ T_world_object[:3, :3].T + T_world_object[:3, 3]
 
+    def _halfspaces_world(self, i: int, T_world_object: np.ndarray) -> list[np.ndarray]:
+        """Object i's convex parts as half-spaces (finger_clearance.halfspaces) at T_world_object."""
+        if self._part_halfspaces is None:
+            self._part_halfspaces = [[halfspaces(p) for p in o.model.convex_parts] for o in self.scene.objects]
+        R, t = T_world_object[:3, :3], T_world_object[:3, 3]
+        out = []
+        for planes in self._part_halfspaces[i]:
+            normals = planes[:, :3] @ R.T
+            out.append(np.column_stack([normals, planes[:, 3] - normals @ t]))
+        return out
+
     def target_geometry(self, object_id: int, poses: dict[int, np.ndarray] | None = None) -> TargetGeometry:
-        """The target's vertices and centre of mass in the world and the other objects' vertices, with
-        objects at `poses` (object id -> T_world_object; objects not in it: as built)."""
+        """The target's vertices and centre of mass in the world and the other objects' vertices and
+        convex parts, with objects at `poses` (object id -> T_world_object; objects not in it: as built)."""
         poses = poses or {}
         geometry = None
-        obstacles = []
+        obstacles, obstacle_halfspaces = [], []
         for i, (other_id, placed) in enumerate(zip(self.body_names, self.scene.objects, strict=True)):
             T = np.asarray(poses.get(other_id, placed.T_world_object), dtype=np.float64)
             vertices_world = self._vertices_world(i, T)
             if other_id != object_id:
                 obstacles.append(vertices_world)
+                obstacle_halfspaces += self._halfspaces_world(i, T)
                 continue
             com_world = T[:3, :3] @ self.model.body(self.body_names[object_id]).ipos + T[:3, 3]
             geometry = TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
@@ -242,6 +258,7 @@ class Twin:
             raise KeyError(f"object {object_id} is not in the twin")
         if obstacles:
             geometry.obstacle_vertices_world = np.concatenate(obstacles)
+        geometry.obstacle_halfspaces = obstacle_halfspaces
         return geometry
 
     def initial_state(

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from arm_planner.finger_clearance import clearance_m
 from arm_planner.mppi import STATE_SPEC
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, stabilize_servos, usable_parts
 from arm_sim import robot
@@ -28,6 +29,9 @@ def test_twin_maps_ids_to_bodies_and_targets():
     T_up[:3, 3] = (0.0, 0.0, 0.34)
     moved = twin.target_geometry(5, {3: T_up})
     assert moved.obstacle_vertices_world[:, 2].min() == pytest.approx(0.30)
+    # ... and its convex parts as half-spaces, where it stands.
+    assert clearance_m(np.array([[0.0, 0.0, 0.34]]), moved.obstacle_halfspaces) == pytest.approx(-0.025)
+    assert clearance_m(np.array([[0.0, 0.0, 0.04]]), moved.obstacle_halfspaces) == pytest.approx(0.26)
 
 
 def test_degenerate_objects_are_skipped_with_a_reason():
