@@ -84,17 +84,18 @@ def clear_closing_axis(
     within blocked_below_m of an obstacle; then, of `candidates` axes over half a turn that `fits`
     (the target fits between the fingers along it), the nearest to the preferred one with wanted_m of
     clearance, or else the clearest."""
-    preferred = np.asarray(preferred_axis_xy, dtype=np.float64)[:2]
-    preferred = preferred / (np.linalg.norm(preferred) + 1e-12)
+    given = np.asarray(preferred_axis_xy, dtype=np.float64)
+    kept = np.append(given[:2], 0.0)  # returned as given (a unit axis): a clear grasp plans exactly as before
+    preferred = given[:2] / (np.linalg.norm(given[:2]) + 1e-12)
     if not fingers.known or not obstacle_halfspaces:
-        return np.append(preferred, 0.0)
+        return kept
     preferred_clearance = clearance_m(finger_points(grasp_point_world, preferred, fingers), obstacle_halfspaces)
     if preferred_clearance >= blocked_below_m:
-        return np.append(preferred, 0.0)
+        return kept
     start = np.arctan2(preferred[1], preferred[0])
     turns = np.pi * np.arange(1, candidates) / candidates
     turns = np.where(turns > np.pi / 2, turns - np.pi, turns)  # signed turn from the preferred axis
-    best, best_clearance, best_turn = preferred, preferred_clearance, 0.0
+    best, best_clearance, best_turn = kept[:2], preferred_clearance, 0.0
     for turn in turns[np.argsort(np.abs(turns), kind="stable")]:
         axis = np.array([np.cos(start + turn), np.sin(start + turn)])
         if not fits(axis):

@@ -101,6 +101,9 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.push_cage = declare(
         node, "push_cage", PlannerConfig.push_cage, "Push: open fingers fore and aft of an object that fits"
     )
+    config.clear_fingers = declare(
+        node, "clear_fingers", PlannerConfig.clear_fingers, "Grasp: turn the fingers off neighbouring objects"
+    )
     config.object_friction = declare(
         node, "object_friction", PlannerConfig.object_friction, "Twin: object-table sliding friction", 0.05, 2.0
     )
