@@ -127,8 +127,10 @@ class PlannerConfig:
     # Rearrange: close the fingers along the carry direction when the object fits (GraspReward).
     carry_closing_along: bool = True
     # Grasp and rearrange: turn the closing axis where a finger would land on another object
-    # (finger_clearance; needs the robot spec's finger sizes).
-    clear_fingers: bool = True
+    # (finger_clearance; needs the robot spec's finger sizes). Off: on the 99-episode design's grasp and
+    # rearrange episodes ground truth lost 3 and gained 2 over two seeds, `arm` 1 and 1, baseline +2 -1
+    # (docs/experiments.md).
+    clear_fingers: bool = False
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
