@@ -239,9 +239,12 @@ class Twin:
             out.append(np.column_stack([normals, planes[:, 3] - normals @ t]))
         return out
 
-    def target_geometry(self, object_id: int, poses: dict[int, np.ndarray] | None = None) -> TargetGeometry:
-        """The target's vertices and centre of mass in the world and the other objects' vertices and
-        convex parts, with objects at `poses` (object id -> T_world_object; objects not in it: as built)."""
+    def target_geometry(
+        self, object_id: int, poses: dict[int, np.ndarray] | None = None, with_halfspaces: bool = True
+    ) -> TargetGeometry:
+        """The target's vertices and centre of mass in the world and the other objects' vertices and (if
+        with_halfspaces) convex parts, with objects at `poses` (object id -> T_world_object; objects not
+        in it: as built)."""
         poses = poses or {}
         geometry = None
         obstacles, obstacle_halfspaces = [], []
@@ -250,7 +253,8 @@ class Twin:
             vertices_world = self._vertices_world(i, T)
             if other_id != object_id:
                 obstacles.append(vertices_world)
-                obstacle_halfspaces += self._halfspaces_world(i, T)
+                if with_halfspaces:
+                    obstacle_halfspaces += self._halfspaces_world(i, T)
                 continue
             com_world = T[:3, :3] @ self.model.body(self.body_names[object_id]).ipos + T[:3, 3]
             geometry = TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
