@@ -76,14 +76,14 @@ def clear_closing_axis(
     fingers: OpenFingers,
     obstacle_halfspaces: list[np.ndarray],
     fits=lambda axis_xy: True,
-    blocked_below_m: float = 0.005,
+    blocked_below_m: float = 0.0,
     wanted_m: float = 0.01,
     candidates: int = 12,
 ) -> np.ndarray:
     """The closing axis (unit, horizontal, [3] with z 0): the preferred one unless a finger would come
-    within blocked_below_m of an obstacle; then, of `candidates` axes over half a turn that `fits`
-    (the target fits between the fingers along it), the nearest to the preferred one with wanted_m of
-    clearance, or else the clearest."""
+    within blocked_below_m of an obstacle (0: only where it would certainly enter one); then, of
+    `candidates` axes over half a turn that `fits` (the target fits between the fingers along it), the
+    nearest to the preferred one with wanted_m of clearance, or else the clearest."""
     given = np.asarray(preferred_axis_xy, dtype=np.float64)
     kept = np.append(given[:2], 0.0)  # returned as given (a unit axis): a clear grasp plans exactly as before
     preferred = given[:2] / (np.linalg.norm(given[:2]) + 1e-12)
