@@ -224,20 +224,24 @@ class GraspReward(TaskReward):
         if self.carry_height_m > 0 and self.finger_gap_open_m > 0:
             carry = np.append(self.goal_displacement[:2], 0.0)
             carry /= np.linalg.norm(carry) + 1e-9
-            if np.ptp(_offsets_along(g, carry[:2])) + 2 * self.carry_closing_margin_m <= self.finger_gap_open_m:
+            if self._fits_between(carry[:2], self.finger_gap_open_m):
                 self.closing_axis = carry
         if self.fingers is not None:
-            gap = self.fingers.gap_m - 2 * self.carry_closing_margin_m
             self.closing_axis = clear_closing_axis(
                 self.grasp_point,
                 self.closing_axis,
                 self.fingers,
                 g.obstacle_halfspaces,
-                fits=lambda axis_xy: np.ptp(_offsets_along(g, axis_xy)) <= gap,
+                fits=lambda axis_xy: self._fits_between(axis_xy, self.fingers.gap_m),
             )
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
+
+    def _fits_between(self, axis_xy: np.ndarray, gap_m: float) -> bool:
+        """The target fits between fingers gap_m apart (m) closing along axis_xy, with
+        carry_closing_margin_m to spare on each side."""
+        return bool(np.ptp(_offsets_along(self.geometry, axis_xy)) + 2 * self.carry_closing_margin_m <= gap_m)
 
     def _clearing_height(self, start_bottom_z: float) -> float:
         """Carry height (m above the start) whose base clears the objects between the target's centre
