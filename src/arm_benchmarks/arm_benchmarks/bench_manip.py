@@ -34,8 +34,8 @@ from arm_core.run_key import run_key
 from arm_core.stats import json_safe, median
 from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
-from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.session import ManipulationSession
+from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.twin import TwinObject
 from arm_planner.world_execution import run_in_world
 from arm_reconstruction.checkpoint import default_checkpoint_path

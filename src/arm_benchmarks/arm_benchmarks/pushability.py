@@ -30,7 +30,7 @@ from arm_benchmarks.bench_manip import GOALS
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_core.stats import json_safe, median, wilson_interval
 from arm_planner.planner import PlannerConfig
-from arm_planner.rewards import TASK_PUSH
+from arm_planner.tasks import TASK_PUSH
 from arm_sim.objects import object_pool
 from arm_sim.scenes import random_rotation
 from arm_sim.world import SLIDING_FRICTION

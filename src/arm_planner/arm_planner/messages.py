@@ -8,7 +8,7 @@ from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_interfaces.action import Manipulate
-from arm_planner.rewards import TASK_GRASP, TASK_PUSH, TASK_REARRANGE
+from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE
 from arm_planner.twin import TwinObject
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.meshes import msg_to_mesh

@@ -28,19 +28,11 @@ from arm_planner.mppi import (
     set_sleep,
     state_layout,
 )
-from arm_planner.rewards import (
-    GRASP_LIFT_M,
-    TASK_GRASP,
-    TASK_PUSH,
-    TASK_REARRANGE,
-    TASKS,
-    CagePushReward,
-    GraspReward,
-    PushReward,
-    RewardWeights,
-    TargetGeometry,
-)
 from arm_planner.robot_spec import ResolvedRobot, RobotSpec
+from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
+from arm_planner.tasks.base import RewardWeights, TargetGeometry
+from arm_planner.tasks.grasp import GraspReward
+from arm_planner.tasks.push import CagePushReward, PushReward
 from arm_planner.twin import OVERLAP_EXCLUDE_M
 from arm_sim.world import SLIDING_FRICTION
 

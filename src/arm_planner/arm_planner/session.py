@@ -23,8 +23,8 @@ from arm_planner.planner import (
     PlanResult,
     Stream,
 )
-from arm_planner.rewards import TASK_GRASP, TASKS
 from arm_planner.robot_spec import RobotSpec
+from arm_planner.tasks import TASK_GRASP, TASKS
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, panda_robot_spec
 
 # Panda: shoulder (joint 2) 0.333 m above the base; shoulder -> wrist (joint 6) at most ~0.80 m

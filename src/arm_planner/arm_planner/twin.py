@@ -20,8 +20,8 @@ import trimesh
 
 from arm_planner.finger_clearance import halfspaces
 from arm_planner.mppi import STATE_SPEC
-from arm_planner.rewards import TargetGeometry
 from arm_planner.robot_spec import RobotSpec
+from arm_planner.tasks.base import TargetGeometry
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel

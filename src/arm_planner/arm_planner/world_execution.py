@@ -15,8 +15,8 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from arm_planner.rewards import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.session import ManipulationSession, Outcome
+from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.twin import TwinObject
 from arm_sim import robot
 

@@ -3,7 +3,8 @@ import pytest
 import trimesh
 
 from arm_planner.finger_clearance import OpenFingers, clear_closing_axis, clearance_m, finger_points, halfspaces
-from arm_planner.rewards import GraspReward, TargetGeometry
+from arm_planner.tasks.base import TargetGeometry
+from arm_planner.tasks.grasp import GraspReward
 
 FINGERS = OpenFingers(gap_m=0.08, thickness_m=0.012, width_m=0.02, length_m=0.055, tcp_above_tip_m=0.007)
 GRASP = np.array([0.0, 0.0, 0.03])

@@ -8,7 +8,7 @@ from gantry import GANTRY_SPEC, gantry_model
 
 from arm_planner.mppi import MppiConfig, get_state
 from arm_planner.planner import Planner, PlannerConfig, PlanRequest
-from arm_planner.rewards import TargetGeometry
+from arm_planner.tasks.base import TargetGeometry
 
 
 def _setup(steps=200, seed=0):

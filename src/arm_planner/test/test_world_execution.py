@@ -7,8 +7,8 @@ from test_planner import _setup
 from arm_benchmarks.bench_manip import ground_truth_objects
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig, PlanRequest
-from arm_planner.rewards import CagePushReward
 from arm_planner.session import ManipulationSession
+from arm_planner.tasks.push import CagePushReward
 from arm_planner.world_execution import run_in_world, tracked_pose
 from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene

@@ -1,0 +1,14 @@
+"""The planner's tasks: grasp, push and rearrange, each a stateful reward for MPPI.
+
+A task reward scores rollouts (batched, vectorised over paths and horizon) and keeps a small state
+machine that advances only on the executed trajectory, as in the paper's appendix "MPPI
+Parameters": ungrasped -> grasping (gripper closes for `close_steps`) -> grasped. `base` holds what
+every task shares (the target's geometry, the weights, kinematics from the state); `grasp` the grasp
+and the rearrange (a grasp carried to a goal); `push` the one-finger and the caging push.
+"""
+
+TASK_GRASP = "grasp"
+TASK_PUSH = "push"
+TASK_REARRANGE = "rearrange"
+TASKS = (TASK_GRASP, TASK_PUSH, TASK_REARRANGE)
+GRASP_LIFT_M = 0.05

@@ -1,0 +1,297 @@
+"""Push: the target slid across the table to a goal, by one finger leaning into the push or by the
+open fingers caging it fore and aft (the push reward is not given in the paper; it uses the grasp's
+terms: approach a point behind the object, opposite the goal direction, then push it there)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from arm_planner.tasks.base import TargetGeometry, TaskReward, angle_down, offsets_along, yaw_error
+
+
+@dataclass
+class PushReward(TaskReward):
+    """Approach a point behind the target (w.r.t. the goal direction) low over the table, then push."""
+
+    goal_displacement: np.ndarray = field(default_factory=lambda: np.array([0.05, -0.30, 0.0]))
+    # Hand target behind the object's surface: clear of it while approaching, 1 cm into it while
+    # pushing (so that pressing on, not hovering at the surface, is what the reward pays for).
+    contact_gap_m: float = 0.015
+    push_gap_m: float = -0.01
+    # The hand leans into the push by this angle (approach axis tilted from straight down towards the
+    # push direction), so the fingertips, not the whole finger, meet the object low at its base: a
+    # vertical finger presses on its full height and tips tall objects over.
+    tilt_rad: float = 0.4
+    contact_height_m: float = 0.018
+    clearance_m: float = 0.012
+    push_goal_weight: float = 10.0
+    upright: float = 1.0
+    engage_distance_m: float = 0.02
+    disengage_distance_m: float = 0.06
+    # While pushing, the goal terms score the rest point, where the object would stop sliding on its
+    # own (x + v|v| / (2 mu g)), not where it is, so a push that would overshoot scores as one.
+    # target_vel_adr: index of the target's free-joint linear velocity in the state vector (None: off).
+    target_vel_adr: int | None = None
+    friction: float = 0.9
+    aim_beyond_m: float = 0.05
+    # Push an object that slid past the goal back (needs a finger ahead of it: the cage).
+    push_back_past_goal: bool = False
+    # Object speed above sqrt(2 a d), d the distance still to go, is penalised (m/s^2, per m/s).
+    braking_m_s2: float = 1.0
+    speed_weight: float = 5.0
+    # Within settled_m of the goal (rest point) the hand backs off to retreat_gap_m behind the object.
+    settled_m: float = 0.015
+    retreat_gap_m: float = 0.04
+    state: str = "approaching"
+    # Pushing, or the hand within disengage_distance_m of its contact point (set by update()).
+    near_contact: bool = False
+
+    def __post_init__(self):
+        g = self.geometry
+        self.start_com = g.com_world.copy()
+        self.goal = g.com_world + self.goal_displacement
+        height = g.top_z - g.bottom_z
+        self.push_z = g.bottom_z + float(min(self.contact_height_m, 0.5 * height))
+        self._vertices_in_target = g.vertices_in_target()
+        # The finger leans into the push, so a part of the object at height z above the contact
+        # height meets the finger tan(tilt) (z - contact height) later than one at the contact height:
+        # the contact point is the first point of the object that the leaning finger meets, not the
+        # object's widest part (an overhanging top would put the fingertip in the air beside a thin
+        # base and the finger against the top, which tips the object over).
+        above = np.maximum(g.vertices_world[:, 2] - self.push_z, 0.0)
+        self._lean_setback = above * np.tan(self.tilt_rad)
+
+    @property
+    def gripper_closed(self) -> bool:
+        return True
+
+    def resume(self, state: str, steps_in_state: int) -> None:
+        if state not in ("approaching", "pushing"):
+            raise ValueError(f"cannot resume a push in state {state!r}")
+        self.state = state
+        self.near_contact = state == "pushing"
+
+    def _direction(self, target_pos: np.ndarray) -> np.ndarray:
+        """Push direction: towards a point aim_beyond_m past the goal along the commanded displacement,
+        which corrects sideways drift but does not swing round when the object is at the goal. With
+        push_back_past_goal, an object past the goal along the displacement is aimed back, aim_beyond_m
+        short of the goal."""
+        nominal = self._nominal_xy()
+        beyond = np.full(target_pos.shape[:-1], self.aim_beyond_m)
+        if self.push_back_past_goal:
+            beyond = np.where(self._past_goal(target_pos), -beyond, beyond)
+        to_aim = self.goal[:2] + beyond[..., None] * nominal - target_pos[..., :2]
+        return to_aim / (np.linalg.norm(to_aim, axis=-1, keepdims=True) + 1e-9)
+
+    def _nominal_xy(self) -> np.ndarray:
+        """Unit horizontal direction of the commanded displacement."""
+        return self.goal_displacement[:2] / (np.linalg.norm(self.goal_displacement[:2]) + 1e-9)
+
+    def _past_goal(self, xy: np.ndarray) -> np.ndarray:
+        """Per position (world xy..., m): beyond the goal along the commanded displacement."""
+        return (xy[..., :2] - self.goal[:2]) @ self._nominal_xy() > 0.0
+
+    def _approach_axis(self, target_pos: np.ndarray) -> np.ndarray:
+        direction = self._direction(target_pos) * np.sin(self.tilt_rad)
+        down = np.full(direction.shape[:-1] + (1,), -np.cos(self.tilt_rad))
+        return np.concatenate([direction, down], axis=-1)
+
+    def _contact_point(self, target_pos: np.ndarray, target_rot: np.ndarray, gap_m=None) -> np.ndarray:
+        """The hand's target gap_m behind the object's surface, opposite the push direction, at the
+        object's pose (target_pos, target_rot): it turns with the object as the push turns it."""
+        gap_m = self.contact_gap_m if gap_m is None else gap_m
+        direction = self._direction(target_pos)
+        reach = self._support_batch(-direction, target_rot)
+        xy = target_pos[..., :2] - direction * (reach + np.asarray(gap_m))[..., None]
+        z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
+        return np.concatenate([xy, z[..., None]], axis=-1)
+
+    def _support_batch(self, directions_xy: np.ndarray, target_rot: np.ndarray) -> np.ndarray:
+        """How far the rotated object reaches from its centre along each horizontal unit direction (m)."""
+        directions = np.concatenate([directions_xy, np.zeros(directions_xy.shape[:-1] + (1,))], axis=-1)
+        in_target = np.einsum("...ji,...j->...i", target_rot, directions)
+        return np.max(in_target @ self._vertices_in_target.T - self._lean_setback, axis=-1)
+
+    def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""
+        if self.target_vel_adr is None:
+            return target_pos[..., :2], np.zeros(target_pos.shape[:-1])
+        velocity = states[..., self.target_vel_adr : self.target_vel_adr + 2]
+        speed = np.linalg.norm(velocity, axis=-1)
+        return target_pos[..., :2] + velocity * (speed / (2.0 * self.friction * 9.81))[..., None], speed
+
+    def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        w = self.weights
+        target_pos, hands = self.rollout_poses(states, controls)
+        pushing = self.state == "pushing"
+        rest, speed = self.rest_xy(states, target_pos)
+        to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
+        settled = to_go < self.settled_m
+        if not self.push_back_past_goal:
+            # One finger cannot bring back an object that will come to rest past the goal: pushing on
+            # only takes it further, so the hand backs off as it does at the goal.
+            settled |= self._past_goal(rest)
+        gap = np.where(settled, self.retreat_gap_m, self.push_gap_m if pushing else self.contact_gap_m)
+        contact = self._contact_point(target_pos, self.target_rot, gap)
+        axis = self._approach_axis(target_pos)
+
+        def score(pos, rot):
+            lean = np.arccos(np.clip(np.einsum("...i,...i->...", rot[..., :, 2], axis), -1.0, 1.0))
+            value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * lean
+            scrape = np.maximum(self.geometry.table_height_m + self.clearance_m - pos[..., 2], 0.0)
+            value = value - w.height * scrape
+            return value if pushing else value - w.height * self.funnel_penalty(pos, contact)
+
+        reward = self.blend(hands, score)
+        if pushing:
+            reward = self._with_pushing_terms(reward, to_go, speed)
+        return reward
+
+    def _with_pushing_terms(self, reward: np.ndarray, to_go: np.ndarray, speed: np.ndarray, free_tilt_rad=0.0):
+        """reward less, while pushing: the rest point's distance to the goal, object speed the hand could
+        not stop from, and the object's tilt beyond free_tilt_rad."""
+        w = self.weights
+        tilt = np.arccos(np.clip(self.target_rot[..., 2, 2], -1.0, 1.0))
+        reward = reward - w.goal * self.push_goal_weight * to_go
+        braking = np.sqrt(2.0 * self.braking_m_s2 * to_go)  # the speed the hand can still stop from
+        reward = reward - self.speed_weight * np.maximum(speed - braking, 0.0)
+        return reward - self.upright * np.maximum(tilt - free_tilt_rad, 0.0)
+
+    def _engage_distance(self, state: np.ndarray) -> float:
+        """The hand's distance (m) from where it engages the object, at an executed state."""
+        hand_pos, _, target_pos, target_rot = self.poses(state[None])
+        return float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
+
+    def update(self, state: np.ndarray) -> str:
+        distance = self._engage_distance(state)
+        self.step_count += 1
+        if self.state == "approaching" and distance < self.engage_distance_m:
+            self.state = "pushing"
+        elif self.state == "pushing" and distance > self.disengage_distance_m:
+            self.state = "approaching"
+        self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
+        return self.state
+
+    def error(self, state: np.ndarray) -> float:
+        _, _, target_pos, _ = self.poses(state[None])
+        return float(np.linalg.norm(self.goal - target_pos[0]))
+
+
+@dataclass
+class CagePushReward(PushReward):
+    """Push with the open fingers straddling the object fore and aft along the push (a cage).
+
+    The rear finger pushes low and the front one catches the object if it starts to tip, so the push
+    does not depend on where the hidden shape first meets a finger (a single finger pushing a
+    top-heavy object tips it unless friction x contact height < the base's reach ahead of the centre
+    of mass; `bench_pushability`). Used for objects that fit between the open fingers
+    (`fits_cage`); the hand comes down vertically over the middle of the object's extent along the
+    push, fingertips just above the table, and then moves with the object to the goal.
+    """
+
+    # The robot's open fingers: inner gap (m), fingertip to palm (m), TCP above the fingertips (m).
+    cage_gap_m: float = 0.082
+    finger_length_m: float = 0.055
+    tcp_above_fingertip_m: float = 0.007
+    tip_clearance_m: float = 0.010
+    palm_clearance_m: float = 0.005
+    # While pushing, the fingers close to the object's extent along the push plus this each side, and
+    # the hand aims this far forward of the cage's middle, so the rear finger presses on the object.
+    cage_margin_m: float = 0.003
+    press_m: float = 0.01
+    # Per radian between the finger closing axis and the push direction.
+    cage_yaw: float = 0.5
+    # The object may lean this far (rad) into the front finger unpenalised: pushed by the rear finger
+    # it leans until the front one holds it.
+    cage_tilt_rad: float = 0.3
+    # The front finger pushes back an object that slid past the goal in the world but not in the twin.
+    push_back_past_goal: bool = True
+
+    def __post_init__(self):
+        g = self.geometry
+        self.start_com = g.com_world.copy()
+        self.goal = g.com_world + self.goal_displacement
+        direction = self._direction(g.com_world[None])[0]
+        along = offsets_along(g, direction)
+        self.extent_along_m = float(along.max() - along.min())
+        self.slack_m = 0.5 * (self.cage_gap_m - self.extent_along_m)
+        tip_z = max(g.bottom_z + self.tip_clearance_m, g.top_z + self.palm_clearance_m - self.finger_length_m)
+        cage = np.array([*(g.com_world[:2] + direction * 0.5 * (along.max() + along.min())), 0.0])
+        cage[2] = tip_z + self.tcp_above_fingertip_m
+        self.cage_offset = cage - g.com_world
+        # While the hand is further than the slack from the cage point, its fingertips stay this much
+        # above the object's top.
+        self._rise_m = g.top_z + self.tip_clearance_m - tip_z
+
+    @classmethod
+    def fits_cage(
+        cls,
+        geometry: TargetGeometry,
+        goal_displacement: np.ndarray,
+        cage_gap_m: float,
+        finger_length_m: float,
+        margin_m: float = 0.008,
+        max_tip_height_m: float = 0.03,
+    ) -> bool:
+        """Whether the object fits between open fingers cage_gap_m apart along the push, with margin_m
+        each side, and under the palm with the fingertips at most max_tip_height_m above its bottom."""
+        if cage_gap_m <= 0:
+            return False
+        direction = np.asarray(goal_displacement, dtype=np.float64)[:2]
+        along = offsets_along(geometry, direction / (np.linalg.norm(direction) + 1e-9))
+        height = geometry.top_z - geometry.bottom_z
+        return float(np.ptp(along)) + 2 * margin_m <= cage_gap_m and height <= finger_length_m + max_tip_height_m
+
+    def cage_funnel_penalty(self, hand_pos: np.ndarray, cage: np.ndarray) -> np.ndarray:
+        """How far (m) the hand is below the height at which its fingertips clear the object's top,
+        while it is further than the cage's slack from the cage point horizontally."""
+        d_xy = np.linalg.norm(hand_pos[..., :2] - cage[..., :2], axis=-1)
+        margin = max(self.slack_m - 0.003, 0.002)
+        floor = cage[..., 2] + self._rise_m * np.clip((d_xy - margin) / 0.005, 0.0, 1.0)
+        return np.maximum(floor - hand_pos[..., 2], 0.0)
+
+    @property
+    def gripper_closed(self) -> bool:
+        return False
+
+    def gripper_command(self, open_command: float, closed_command: float) -> float:
+        """Open while approaching; while pushing, closed to the object's extent along the push plus
+        cage_margin_m each side (the inner gap changes by twice the command of one finger)."""
+        if self.state != "pushing":
+            return open_command
+        narrower_by = self.cage_gap_m - (self.extent_along_m + 2 * self.cage_margin_m)
+        command = open_command - np.sign(open_command - closed_command) * max(narrower_by, 0.0) / 2
+        return float(np.clip(command, min(open_command, closed_command), max(open_command, closed_command)))
+
+    def __call__(self, states: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        w = self.weights
+        target_pos, hands = self.rollout_poses(states, controls)
+        pushing = self.state == "pushing"
+        direction = self._direction(target_pos)
+        cage = target_pos + self.cage_offset
+        if pushing:
+            lead = self.cage_margin_m + self.press_m
+            cage = cage + np.concatenate([direction * lead, np.zeros(direction.shape[:-1] + (1,))], axis=-1)
+
+        def score(pos, rot):
+            value = (
+                -w.distance * np.linalg.norm(pos - cage, axis=-1)
+                - w.angle * angle_down(rot)
+                - self.cage_yaw * yaw_error(rot, direction)
+            )
+            scrape = np.maximum(self.geometry.table_height_m + self.clearance_m - pos[..., 2], 0.0)
+            value = value - w.height * scrape
+            return value if pushing else value - w.height * self.cage_funnel_penalty(pos, cage)
+
+        reward = self.blend(hands, score)
+        if pushing:
+            rest, speed = self.rest_xy(states, target_pos)
+            to_go = np.linalg.norm(self.goal[:2] - rest, axis=-1)
+            reward = self._with_pushing_terms(reward, to_go, speed, self.cage_tilt_rad)
+        return reward
+
+    def _engage_distance(self, state: np.ndarray) -> float:
+        hand_pos, _, target_pos, _ = self.poses(state[None])
+        return float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
