@@ -32,12 +32,13 @@ from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, 
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
 from arm_core.run_key import run_key
 from arm_core.stats import json_safe, median
+from arm_planner.depth_tracking import DepthTracker
 from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.twin import TwinObject
-from arm_planner.world_execution import run_in_world
+from arm_planner.world_execution import Reobservation, run_in_world
 from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import reconstruct
@@ -137,7 +138,18 @@ def target_stability_m(session: ManipulationSession, target_id: int, objects, ta
     return float(np.linalg.norm(data.xipos[body] - start))
 
 
-def run_method(method, scene, target_index, frame, task, config, twin_timestep_s, period_steps) -> dict:
+def reobservation(tracker: str, objects: list[TwinObject], frame, seed: int) -> Reobservation | None:
+    """None for the perfect tracker; for "depth", new frames through the view's camera, the objects'
+    poses fitted to them with the method's own meshes (arm_planner.depth_tracking)."""
+    if tracker == "perfect":
+        return None
+    tracker = DepthTracker({o.id: o.mesh for o in objects}, seed=seed)
+    return Reobservation(frame.T_world_camera, tracker, DepthNoise(), np.random.default_rng(seed))
+
+
+def run_method(
+    method, scene, target_index, frame, task, config, twin_timestep_s, period_steps, tracker="perfect", seed=0
+) -> dict:
     started = time.perf_counter()
     row = {"method": method}
     try:
@@ -147,11 +159,21 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
             return row | {"success": False, "unavailable": f"{type(error).__name__}: {error}"}
         return row | {"success": False, "failure": f"reconstruction failed: {type(error).__name__}: {error}"}
     row["reconstruct_s"] = time.perf_counter() - started
+    reobserve = reobservation(tracker, objects, frame, seed) if period_steps > 0 else None
     session = ManipulationSession(config, twin_timestep_s)
     world = SimWorld(scene, robot_arm=True)
     try:
         run = run_in_world(
-            session, world, objects, scene.table_height_m, target_index, task, GOALS[task], TOLERANCE_M, period_steps
+            session,
+            world,
+            objects,
+            scene.table_height_m,
+            target_index,
+            task,
+            GOALS[task],
+            TOLERANCE_M,
+            period_steps,
+            reobserve,
         )
         outcome = run.outcome
         row.update(
@@ -161,6 +183,8 @@ def run_method(method, scene, target_index, frame, task, config, twin_timestep_s
             twin_objects=outcome.twin_objects,
             observations=run.observations,
         )
+        if reobserve is not None:
+            row |= {"poses_fitted": reobserve.fitted, "poses_kept": reobserve.kept}
         if outcome.result is not None and len(outcome.result.step_ms):
             row["mppi_step_ms"] = median(outcome.result.step_ms)
             row["plan_steps"] = len(outcome.result.times_s)
@@ -240,6 +264,12 @@ def main(argv=None) -> int:
         type=float,
         default=0.1,
         help="closed loop: the twin observes the world's state every this many seconds (0: open loop, the paper's)",
+    )
+    parser.add_argument(
+        "--tracker",
+        choices=("perfect", "depth"),
+        default="perfect",
+        help="closed loop: object poses from the true motion (perfect) or fitted to new depth frames (depth)",
     )
     parser.add_argument("--nthread", type=int, default=2)
     parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
@@ -372,6 +402,7 @@ def main(argv=None) -> int:
             ("friction", args.friction, SLIDING_FRICTION),
             ("push_cage", args.push_cage, PlannerConfig.push_cage),
             ("only_tasks", run_tasks, args.tasks),
+            ("tracker", args.tracker, "perfect"),
         )
         if value != default
     }
@@ -407,7 +438,16 @@ def main(argv=None) -> int:
                 continue
             for method in todo:
                 row = base | run_method(
-                    method, scene, target_index, frame, episode.task, config, args.twin_timestep, period_steps
+                    method,
+                    scene,
+                    target_index,
+                    frame,
+                    episode.task,
+                    config,
+                    args.twin_timestep,
+                    period_steps,
+                    args.tracker,
+                    episode.seed,
                 )
                 row["run_key"] = key
                 sink.write(json.dumps(row) + "\n")

@@ -4,8 +4,10 @@ Open loop (the paper's protocol): one plan from the first view, executed afterwa
 Closed loop: every control step the planner executes in its twin also runs in the world, and every
 `period_steps` steps the twin's state is replaced by an observation of the world: the robot's joint
 positions and velocities, and each object's pose from a perfect tracker (the object's true rigid
-motion since the view, applied to the method's own mesh; shapes stay the method's reconstruction).
-Same step budget as open loop.
+motion since the view, applied to the method's own mesh; shapes stay the method's reconstruction),
+or, with a `Reobservation`, from a new depth frame of the world through the first view's camera
+(depth_tracking: the method's mesh fitted to the object's pixels; an object out of view keeps the
+twin's prediction). Same step budget as open loop.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
+from arm_planner.depth_tracking import DepthTracker
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.twin import TwinObject
@@ -42,6 +45,29 @@ def task_outcome(task: str, start: np.ndarray, end: np.ndarray, goal_displacemen
     return error <= tolerance_m, error
 
 
+@dataclasses.dataclass
+class Reobservation:
+    """Where the closed loop's object poses come from instead of the perfect tracker: frames of the
+    world rendered through T_world_camera with the world's depth noise (arm_sim DepthNoise or None
+    for its default) and rng, fitted by the tracker."""
+
+    T_world_camera: np.ndarray
+    tracker: DepthTracker
+    noise: object = None
+    rng: np.random.Generator | None = None
+    fitted: int = 0
+    kept: int = 0
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """Axis times angle (rad) of a rotation matrix (angles below pi)."""
+    angle = float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+    if angle < 1e-9:
+        return np.zeros(3)
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * np.sin(angle))
+    return axis * angle
+
+
 def tracked_pose(T_view_true: np.ndarray, T_now_true: np.ndarray, T_view_method: np.ndarray) -> np.ndarray:
     """The method's object pose moved by the true object's rigid motion since the view."""
     return T_now_true @ np.linalg.inv(T_view_true) @ T_view_method
@@ -51,8 +77,12 @@ class WorldSync:
     """Planner `observe` hook: executes each control step in the world and, every `period_steps`,
     writes the world's robot state and tracked object poses and velocities into the twin."""
 
-    def __init__(self, session: ManipulationSession, world, objects: list[TwinObject], period_steps: int):
+    def __init__(
+        self, session: ManipulationSession, world, objects: list[TwinObject], period_steps: int, reobserve=None
+    ):
         self.session, self.world, self.period = session, world, int(period_steps)
+        self.reobserve: Reobservation | None = reobserve
+        self._last_fit: dict[int, tuple[float, np.ndarray]] = {}
         self.control_dt_s = session.config.mppi.control_dt_s
         self.objects = {o.id: o for o in objects}
         self.poses_at_view = world.object_poses()
@@ -60,19 +90,55 @@ class WorldSync:
         self.actuators = None
         self.observations = 0
 
+    @staticmethod
+    def _free_joint(model, name: str) -> tuple[int, int]:
+        joint = model.body(name).jntadr[0]
+        return model.jnt_qposadr[joint], model.jnt_dofadr[joint]
+
+    def _set_free_body(self, model, data, name: str, T: np.ndarray, v_world: np.ndarray, omega_world: np.ndarray):
+        """A twin object's free joint set to pose T (4x4 world), its origin's velocity v_world (m/s) and
+        angular velocity omega_world (rad/s, world frame)."""
+        qadr, vadr = self._free_joint(model, name)
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, np.ascontiguousarray(T[:3, :3]).reshape(9))
+        data.qpos[qadr : qadr + 7] = np.concatenate([T[:3, 3], quat])
+        data.qvel[vadr : vadr + 3] = v_world
+        data.qvel[vadr + 3 : vadr + 6] = T[:3, :3].T @ omega_world  # free joint: body-frame angular velocity
+
     def _set_object(self, model, data, name: str, world_body: int, T_twin: np.ndarray) -> None:
         w = self.world
-        joint = model.body(name).jntadr[0]
-        qadr, vadr = model.jnt_qposadr[joint], model.jnt_dofadr[joint]
-        quat = np.zeros(4)
-        mujoco.mju_mat2Quat(quat, np.ascontiguousarray(T_twin[:3, :3]).reshape(9))
-        data.qpos[qadr : qadr + 7] = np.concatenate([T_twin[:3, 3], quat])
         wjoint = w.model.body_jntadr[world_body]
         wv = w.data.qvel[w.model.jnt_dofadr[wjoint] : w.model.jnt_dofadr[wjoint] + 6]
-        R_world = w.data.xmat[world_body].reshape(3, 3)
-        omega = R_world @ wv[3:]  # free joint: angular velocity in the body frame
-        data.qvel[vadr : vadr + 3] = wv[:3] + np.cross(omega, T_twin[:3, 3] - w.data.xpos[world_body])
-        data.qvel[vadr + 3 : vadr + 6] = T_twin[:3, :3].T @ omega
+        omega = w.data.xmat[world_body].reshape(3, 3) @ wv[3:]
+        v = wv[:3] + np.cross(omega, T_twin[:3, 3] - w.data.xpos[world_body])
+        self._set_free_body(model, data, name, T_twin, v, omega)
+
+    def _twin_pose(self, model, data, name: str) -> np.ndarray:
+        qadr, _ = self._free_joint(model, name)
+        T = np.eye(4)
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, data.qpos[qadr + 3 : qadr + 7])
+        T[:3, :3], T[:3, 3] = R.reshape(3, 3), data.qpos[qadr : qadr + 3]
+        return T
+
+    def _reobserve(self, model, data) -> None:
+        """Object poses fitted to a new frame; velocities from the change since the object's last fit."""
+        r, names = self.reobserve, self.session.twin.body_names
+        predicted = {object_id: self._twin_pose(model, data, name) for object_id, name in names.items()}
+        frame = self.world.render(r.T_world_camera, noise=r.noise, rng=r.rng, with_visibility=False)
+        fitted = r.tracker.track(frame.depth_m, frame.labels, frame.K, r.T_world_camera, predicted)
+        now_s = (self.observations + 1) * self.period * self.control_dt_s
+        for object_id, T in fitted.items():
+            v, omega = np.zeros(3), np.zeros(3)
+            if object_id in self._last_fit:
+                then_s, T_then = self._last_fit[object_id]
+                dt = max(now_s - then_s, 1e-6)
+                v = (T[:3, 3] - T_then[:3, 3]) / dt
+                omega = rotation_vector(T[:3, :3] @ T_then[:3, :3].T) / dt
+            self._set_free_body(model, data, names[object_id], T, v, omega)
+            self._last_fit[object_id] = (now_s, T)
+        r.fitted += len(fitted)
+        r.kept += len(predicted) - len(fitted)
 
     def __call__(self, step: int, control: np.ndarray, model, data) -> bool:
         if self.actuators is None:
@@ -85,6 +151,10 @@ class WorldSync:
             twin_joint, world_joint = model.joint(name), w.model.joint(name)
             data.qpos[twin_joint.qposadr[0]] = w.data.qpos[world_joint.qposadr[0]]
             data.qvel[twin_joint.dofadr[0]] = w.data.qvel[world_joint.dofadr[0]]
+        if self.reobserve is not None:
+            self._reobserve(model, data)
+            self.observations += 1
+            return True
         poses_now = w.object_poses()
         for object_id, body_name in self.session.twin.body_names.items():
             n = object_id - 1
@@ -104,13 +174,15 @@ def run_in_world(
     goal_displacement_m,
     tolerance_m: float,
     period_steps: int = 0,
+    reobserve: Reobservation | None = None,
 ) -> WorldRun:
     """Plan on `objects` and execute in `world` (a SimWorld of the true scene, robot at home);
-    period_steps 0 = open loop. Object id n is the world's object n - 1."""
+    period_steps 0 = open loop; reobserve: object poses from new frames instead of the perfect
+    tracker (closed loop only). Object id n is the world's object n - 1."""
     body = world.object_ids[target_index]
     start = world.data.xipos[body].copy()
     session.set_objects(objects, table_height_m)
-    sync = WorldSync(session, world, objects, period_steps) if period_steps > 0 else None
+    sync = WorldSync(session, world, objects, period_steps, reobserve) if period_steps > 0 else None
     outcome = session.request(
         task,
         target_index + 1,

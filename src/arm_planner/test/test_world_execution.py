@@ -5,11 +5,13 @@ import trimesh
 from test_planner import _setup
 
 from arm_benchmarks.bench_manip import ground_truth_objects
+from arm_core.camera import look_at
+from arm_planner.depth_tracking import DepthTracker
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig, PlanRequest
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks.push import CagePushReward
-from arm_planner.world_execution import run_in_world, tracked_pose
+from arm_planner.world_execution import Reobservation, run_in_world, tracked_pose
 from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import SimWorld
@@ -66,6 +68,27 @@ def test_closed_loop_grasp_runs_in_the_world_and_the_twin_tracks_it():
     steps = len(run.outcome.result.times_s)
     assert run.success and run.error_m == 0.0, run.outcome.message
     assert run.observations == steps // 5
+    twin = session.twin
+    twin_z = session.planner._data.xipos[twin.model.body(twin.body_name(1)).id][2]
+    assert abs(twin_z - world.data.xipos[world.object_ids[0]][2]) < 0.01, "twin and world agree on the lift"
+    session.close()
+    world.close()
+
+
+def test_closed_loop_from_new_frames_lifts_the_box_and_the_twin_follows_it():
+    """The same grasp with the box's pose fitted to rendered depth frames instead of the true pose."""
+    part = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
+    T = np.eye(4)
+    T[:3, 3] = (0.05, 0.0, 0.04)
+    scene = Scene([PlacedObject(ObjectModel("box", "box", part, [part]), 1.0, T)])
+    session = ManipulationSession(PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0)), 0.01)
+    world = SimWorld(scene, robot_arm=True)
+    objects = ground_truth_objects(scene)
+    camera = look_at(np.array([0.55, 0.35, 0.35]), np.array([0.05, 0.0, 0.06]))
+    reobserve = Reobservation(camera, DepthTracker({o.id: o.mesh for o in objects}), rng=np.random.default_rng(0))
+    run = run_in_world(session, world, objects, 0.0, 0, "grasp", (0, 0, 0), 0.025, 5, reobserve)
+    assert run.success, run.outcome.message
+    assert reobserve.fitted >= run.observations // 2, (reobserve.fitted, reobserve.kept)
     twin = session.twin
     twin_z = session.planner._data.xipos[twin.model.body(twin.body_name(1)).id][2]
     assert abs(twin_z - world.data.xipos[world.object_ids[0]][2]) < 0.01, "twin and world agree on the lift"
