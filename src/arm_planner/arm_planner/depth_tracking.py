@@ -3,8 +3,11 @@
 The closed loop of the manipulation benchmark can observe the objects the way a robot would: a new
 RGB-D frame from the same camera, the pixels of each object (its instance mask), and the object's
 mesh (the method's reconstruction, not the true shape) moved onto those points by point-to-plane ICP,
-starting from where the twin predicts it is. An object with too few points in view (hidden, or behind
-the hand) keeps the twin's prediction.
+starting from where the twin predicts it is. The twin's prediction stands where the view cannot
+correct it: an object with too few points in view (hidden, or behind the hand), a fit that leaves
+the points off the mesh, one that would move it further than an object moves between two frames,
+and one within the depth noise of the prediction (an object at rest stays put). Directions the
+points do not pin down (a sliding plane, a solid of revolution's spin) are damped to no motion.
 """
 
 from __future__ import annotations
@@ -22,15 +25,26 @@ from arm_core.camera import backproject_pixels
 class DepthTrackingParams:
     """model_points: points sampled on each mesh's surface; max_points: observed points used per
     object (a random subset); min_points: fewer points in view keep the prediction; iterations: ICP
-    steps; max_distance_m: correspondences further apart are ignored; max_shift_m: a fit that moves
-    the object further than this from the prediction is refused (a wrong match, not a motion)."""
+    steps; max_distance_m: correspondences further apart are ignored; damping: weight (relative to
+    the number of points) that keeps unconstrained motions at zero, rotations measured at the
+    mesh's radius; min_inlier_share, max_rms_m: the fitted points that must lie within
+    max_distance_m of the mesh, and their largest RMS point-to-plane distance; max_shift_m,
+    max_turn_rad: a fit moving the object further from the prediction is refused (a wrong match:
+    0.02 m per 0.1 s frame is 0.2 m/s); min_shift_m, min_turn_rad: a fit closer to the prediction
+    is depth noise and leaves it."""
 
     model_points: int = 1500
     max_points: int = 400
     min_points: int = 30
     iterations: int = 8
     max_distance_m: float = 0.015
-    max_shift_m: float = 0.05
+    damping: float = 0.05
+    min_inlier_share: float = 0.7
+    max_rms_m: float = 0.004
+    max_shift_m: float = 0.02
+    max_turn_rad: float = 0.35
+    min_shift_m: float = 0.003
+    min_turn_rad: float = 0.05
 
 
 def _small_motion(omega: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -51,7 +65,7 @@ class DepthTracker:
     def __init__(self, meshes: dict[int, trimesh.Trimesh], params: DepthTrackingParams | None = None, seed: int = 0):
         self.params = params or DepthTrackingParams()
         self.rng = np.random.default_rng(seed)
-        self.models: dict[int, tuple[cKDTree, np.ndarray, np.ndarray]] = {}
+        self.models: dict[int, tuple[cKDTree, np.ndarray, np.ndarray, float]] = {}
         for object_id, mesh in meshes.items():
             if mesh is None or len(mesh.faces) == 0:
                 continue
@@ -59,18 +73,21 @@ class DepthTracker:
             if len(points) == 0:
                 continue
             normals = mesh.face_normals[faces]
-            self.models[object_id] = (cKDTree(points), np.asarray(points), np.asarray(normals))
+            radius_m = max(float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()), 1e-3)
+            self.models[object_id] = (cKDTree(points), np.asarray(points), np.asarray(normals), radius_m)
 
     def fit(self, object_id: int, points_world: np.ndarray, T_world_object: np.ndarray) -> np.ndarray | None:
         """The object's pose (4x4) with its mesh on points_world (N, 3), from T_world_object; None when
-        it has no model, too few points or the fit moves it by more than max_shift_m."""
+        the prediction stands (see the module docstring)."""
         p = self.params
         if object_id not in self.models or len(points_world) < p.min_points:
             return None
         if len(points_world) > p.max_points:
             points_world = points_world[self.rng.choice(len(points_world), p.max_points, replace=False)]
-        tree, model_points, model_normals = self.models[object_id]
-        T = np.asarray(T_world_object, dtype=np.float64).copy()
+        tree, model_points, model_normals, radius_m = self.models[object_id]
+        T_start = np.asarray(T_world_object, dtype=np.float64)
+        T = T_start.copy()
+        scale = np.array([radius_m] * 3 + [1.0] * 3)
         for _ in range(p.iterations):
             local = (points_world - T[:3, 3]) @ T[:3, :3]
             distance, index = tree.query(local, distance_upper_bound=p.max_distance_m)
@@ -78,14 +95,26 @@ class DepthTracker:
             if close.sum() < p.min_points:
                 return None
             src, q, n = local[close], model_points[index[close]], model_normals[index[close]]
-            A = np.concatenate([np.cross(src, n), n], axis=1)
+            A = np.concatenate([np.cross(src, n), n], axis=1) / scale  # rotations at the mesh's radius
             b = -np.einsum("ij,ij->i", src - q, n)
-            x, *_ = np.linalg.lstsq(A, b, rcond=None)
+            x = np.linalg.solve(A.T @ A + p.damping * len(b) * np.eye(6), A.T @ b) / scale
             # The points move by delta in the object frame: T^-1 becomes delta T^-1.
             T = T @ np.linalg.inv(_small_motion(x[:3], x[3:]))
-            if np.linalg.norm(x) < 1e-5:
+            if np.linalg.norm(x[3:]) < 1e-5 and np.linalg.norm(x[:3]) < 1e-4:
                 break
-        if np.linalg.norm(T[:3, 3] - T_world_object[:3, 3]) > p.max_shift_m:
+        local = (points_world - T[:3, 3]) @ T[:3, :3]
+        distance, index = tree.query(local, distance_upper_bound=p.max_distance_m)
+        close = np.isfinite(distance)
+        if close.mean() < p.min_inlier_share:
+            return None
+        off_plane = np.einsum("ij,ij->i", local[close] - model_points[index[close]], model_normals[index[close]])
+        if np.sqrt(np.mean(off_plane**2)) > p.max_rms_m:
+            return None
+        shift = float(np.linalg.norm(T[:3, 3] - T_start[:3, 3]))
+        turn = float(np.arccos(np.clip((np.trace(T[:3, :3] @ T_start[:3, :3].T) - 1.0) / 2.0, -1.0, 1.0)))
+        if shift > p.max_shift_m or turn > p.max_turn_rad:
+            return None
+        if shift < p.min_shift_m and turn < p.min_turn_rad:
             return None
         return T
 

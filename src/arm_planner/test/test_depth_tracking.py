@@ -29,8 +29,8 @@ EYE = (0.5, 0.3, 0.4)
 
 
 def test_a_box_seen_from_one_side_is_found_where_it_moved():
-    truth = _pose(0.3, (0.02, -0.01, 0.05))
-    predicted = _pose(0.3 - np.radians(6.0), (0.0, 0.005, 0.05))
+    truth = _pose(0.3, (0.01, -0.005, 0.05))
+    predicted = _pose(0.3 - np.radians(5.0), (0.0, 0.005, 0.05))
     tracker = DepthTracker({1: BOX})
     fitted = tracker.fit(1, _seen_points(BOX, truth, EYE), predicted)
     assert fitted is not None
@@ -38,13 +38,25 @@ def test_a_box_seen_from_one_side_is_found_where_it_moved():
     assert np.degrees(np.linalg.norm(rotation_vector(fitted[:3, :3] @ truth[:3, :3].T))) < 1.0
 
 
-def test_an_object_out_of_view_or_fitted_far_away_keeps_the_prediction():
+def test_the_prediction_stands_out_of_view_within_the_noise_and_after_a_jump():
     truth = _pose(0.0, (0.0, 0.0, 0.05))
     tracker = DepthTracker({1: BOX}, DepthTrackingParams(min_points=30, max_shift_m=0.01))
     seen = _seen_points(BOX, truth, EYE)
     assert tracker.fit(1, seen[:10], truth) is None, "too few points"
     assert tracker.fit(2, seen, truth) is None, "no mesh for that id"
+    assert tracker.fit(1, seen + [0.0, 0.0, 0.001], truth) is None, "1 mm off: depth noise"
     assert tracker.fit(1, seen + [0.0, 0.0, 0.03], truth) is None, "3 cm from the prediction, more than max_shift_m"
+    assert tracker.fit(1, seen + [0.0, 0.0, 0.006], truth) is not None, "6 mm: a motion"
+
+
+def test_a_solid_of_revolution_is_not_spun_about_its_axis():
+    can = trimesh.creation.cylinder(radius=0.03, height=0.1, sections=64)
+    truth = _pose(0.0, (0.0, 0.0, 0.058))
+    predicted = _pose(0.3, (0.0, 0.0, 0.05))  # 8 mm low, and turned by an angle no view can tell
+    fitted = DepthTracker({1: can}).fit(1, _seen_points(can, truth, EYE), predicted)
+    assert fitted is not None
+    assert abs(fitted[2, 3] - 0.058) < 0.001, "lifted as seen"
+    assert abs(np.linalg.norm(rotation_vector(fitted[:3, :3])) - 0.3) < 0.02, "the spin stays as predicted"
 
 
 def test_track_fits_each_object_to_its_own_pixels():
