@@ -5,8 +5,9 @@ visible fraction falls in the episode's bin, one RGB-D view from the robot side 
 instance labels (as in the paper). Every method reconstructs the scene from that view (ground truth
 uses the true meshes), the planner plans the task in a twin of that reconstruction, and the plan is
 executed in the ground-truth world: closed loop by default (every --observe-period seconds the twin
-takes the world's joint states and tracked object poses; see arm_planner.world_execution), or open
-loop as in the paper with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
+takes the world's joint states and tracked object poses, or with --tracker depth the poses of its
+meshes fitted to a new depth frame; see arm_planner.world_execution), or open loop as in the paper
+with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
