@@ -59,6 +59,19 @@ def _small_motion(omega: np.ndarray, v: np.ndarray) -> np.ndarray:
     return T
 
 
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """Axis times angle (rad, 0 to pi) of a rotation matrix."""
+    angle = float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+    if angle < 1e-9:
+        return np.zeros(3)
+    if angle > np.pi - 1e-3:  # the antisymmetric part vanishes: the axis from R + I instead
+        B = (R + np.eye(3)) / 2.0
+        k = int(np.argmax(np.diag(B)))
+        return B[:, k] / np.sqrt(max(B[k, k], 1e-12)) * angle
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * np.sin(angle))
+    return axis * angle
+
+
 class DepthTracker:
     """Fits each object's mesh (object frame, metres) to its observed points (world frame)."""
 
@@ -111,7 +124,7 @@ class DepthTracker:
         if np.sqrt(np.mean(off_plane**2)) > p.max_rms_m:
             return None
         shift = float(np.linalg.norm(T[:3, 3] - T_start[:3, 3]))
-        turn = float(np.arccos(np.clip((np.trace(T[:3, :3] @ T_start[:3, :3].T) - 1.0) / 2.0, -1.0, 1.0)))
+        turn = float(np.linalg.norm(rotation_vector(T[:3, :3] @ T_start[:3, :3].T)))
         if shift > p.max_shift_m or turn > p.max_turn_rad:
             return None
         if shift < p.min_shift_m and turn < p.min_turn_rad:

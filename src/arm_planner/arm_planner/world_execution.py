@@ -17,7 +17,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from arm_planner.depth_tracking import DepthTracker
+from arm_planner.depth_tracking import DepthTracker, rotation_vector
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.twin import TwinObject
@@ -57,15 +57,6 @@ class Reobservation:
     rng: np.random.Generator | None = None
     fitted: int = 0
     kept: int = 0
-
-
-def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """Axis times angle (rad) of a rotation matrix (angles below pi)."""
-    angle = float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
-    if angle < 1e-9:
-        return np.zeros(3)
-    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2.0 * np.sin(angle))
-    return axis * angle
 
 
 def tracked_pose(T_view_true: np.ndarray, T_now_true: np.ndarray, T_view_method: np.ndarray) -> np.ndarray:

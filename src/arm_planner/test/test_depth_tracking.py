@@ -4,8 +4,7 @@ import numpy as np
 import trimesh
 
 from arm_core.camera import intrinsics, look_at
-from arm_planner.depth_tracking import DepthTracker, DepthTrackingParams
-from arm_planner.world_execution import rotation_vector
+from arm_planner.depth_tracking import DepthTracker, DepthTrackingParams, rotation_vector
 
 
 def _pose(yaw_rad: float, translation) -> np.ndarray:
@@ -22,6 +21,16 @@ def _seen_points(mesh: trimesh.Trimesh, T_world_object: np.ndarray, eye) -> np.n
     points, faces = trimesh.sample.sample_surface_even(posed, 3000, seed=1)
     towards = np.einsum("ij,ij->i", posed.face_normals[faces], np.asarray(eye) - points) > 0
     return points[towards]
+
+
+def test_rotation_vector_is_the_axis_times_the_angle_up_to_a_half_turn():
+    for angle in (0.0, 0.3, 2.0, np.pi - 1e-4, np.pi):
+        axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
+        R = trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
+        vector = rotation_vector(R)
+        assert np.isclose(np.linalg.norm(vector), angle, atol=1e-6)
+        if angle > 0:
+            assert np.isclose(abs(vector @ axis), angle, atol=1e-4), "along the axis (either sign at a half turn)"
 
 
 BOX = trimesh.creation.box(extents=(0.06, 0.04, 0.10))
