@@ -140,9 +140,10 @@ class DepthTracker:
         ids = seen[v, u]
         order = np.argsort(ids, kind="stable")
         v, u, ids = v[order], u[order], ids[order]
-        bounds = np.searchsorted(ids, list(predicted), side="left"), np.searchsorted(ids, list(predicted), side="right")
+        object_ids = np.array(list(predicted), dtype=np.int64)
+        starts, stops = np.searchsorted(ids, object_ids, side="left"), np.searchsorted(ids, object_ids, side="right")
         fitted = {}
-        for object_id, start, stop in zip(predicted, *bounds, strict=True):
+        for object_id, start, stop in zip(predicted, starts, stops, strict=True):
             points = backproject_pixels(depth_m, v[start:stop], u[start:stop], K, T_world_camera)
             pose = self.fit(object_id, points, predicted[object_id])
             if pose is not None:
