@@ -168,3 +168,20 @@ def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_p
     command = reward.gripper_command(0.04, 0.0)
     gap = reward.cage_gap_m - 2 * (0.04 - command)
     assert gap == pytest.approx(0.04 + 2 * reward.cage_margin_m)
+
+
+def test_cage_goes_back_over_the_top_when_the_object_is_behind_the_rear_finger():
+    reward = _cage_on((0.04, 0.03, 0.04))
+    com = reward.geometry.com_world
+    cage = com + reward.cage_offset
+    reward.update(np.concatenate([cage, com]))
+    assert reward.state == "pushing"
+    ahead_of_it = np.concatenate([cage + [0.01 + reward.cage_margin_m, 0.0, 0.0], com])
+    assert not reward.out_of_cage(ahead_of_it), "leading by the press distance, the object is still caged"
+    reward.update(ahead_of_it)
+    assert reward.state == "pushing"
+    run_ahead = np.concatenate([cage + [0.04, 0.0, 0.0], com])  # rear finger 2 cm past the object's centre
+    assert reward.out_of_cage(run_ahead)
+    reward.update(run_ahead)
+    assert reward.state == "approaching"
+    assert reward.gripper_command(0.04, 0.0) == 0.04, "fingers open to come down over it again"

@@ -199,7 +199,11 @@ class CagePushReward(PushReward):
     palm_clearance_m: float = 0.005
     # While pushing, the fingers close to the object's extent along the push plus this each side, and
     # the hand aims this far forward of the cage's middle, so the rear finger presses on the object.
-    cage_margin_m: float = 0.003
+    # With 3 mm a side, wine glasses and T-shapes (the rear finger meets the overhanging bowl or bar)
+    # leaned onto the front finger to the edge of cage_tilt_rad and stalled or toppled. Ground truth on
+    # the push episodes of bench_manip seeds 2 and 3 (with out_of_cage): 3 mm 34 of 60, 1.5 mm 36, none
+    # 42 (docs/experiments.md).
+    cage_margin_m: float = 0.0
     press_m: float = 0.01
     # Per radian between the finger closing axis and the push direction.
     cage_yaw: float = 0.5
@@ -208,6 +212,8 @@ class CagePushReward(PushReward):
     cage_tilt_rad: float = 0.3
     # The front finger pushes back an object that slid past the goal in the world but not in the twin.
     push_back_past_goal: bool = True
+    # The object counts as out of the cage when its centre lies this far behind the rear finger (m).
+    out_of_cage_m: float = 0.005
 
     def __post_init__(self):
         g = self.geometry
@@ -295,3 +301,19 @@ class CagePushReward(PushReward):
     def _engage_distance(self, state: np.ndarray) -> float:
         hand_pos, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
+
+    def out_of_cage(self, state: np.ndarray) -> bool:
+        """Whether the object's centre lies behind the rear finger (by out_of_cage_m) at an executed
+        state: it slipped out of the cage (or the hand ran ahead of it)."""
+        hand_pos, _, target_pos, _ = self.poses(state[None])
+        direction = self._direction(target_pos)[0]
+        along = float((target_pos[0, :2] - hand_pos[0, :2]) @ direction)
+        return along < -(0.5 * self.extent_along_m + self.cage_margin_m + self.out_of_cage_m)
+
+    def update(self, state: np.ndarray) -> str:
+        """As PushReward.update, and back to approaching (over the top, fingers open) when the object
+        is out of the cage: closed on an object behind it, the cage can only push it the wrong way."""
+        super().update(state)
+        if self.state == "pushing" and self.out_of_cage(state):
+            self.state = "approaching"
+        return self.state
