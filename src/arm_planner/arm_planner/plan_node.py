@@ -101,6 +101,14 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.push_cage = declare(
         node, "push_cage", PlannerConfig.push_cage, "Push: open fingers fore and aft of an object that fits"
     )
+    config.push_cage_margin_m = declare(
+        node,
+        "push_cage_margin_m",
+        PlannerConfig.push_cage_margin_m,
+        "Push: the cage's clearance to the object each side, m",
+        0.0,
+        0.02,
+    )
     config.clear_fingers = declare(
         node, "clear_fingers", PlannerConfig.clear_fingers, "Grasp: turn the fingers off neighbouring objects"
     )

@@ -199,10 +199,7 @@ class CagePushReward(PushReward):
     palm_clearance_m: float = 0.005
     # While pushing, the fingers close to the object's extent along the push plus this each side, and
     # the hand aims this far forward of the cage's middle, so the rear finger presses on the object.
-    # With 3 mm a side, wine glasses and T-shapes (the rear finger meets the overhanging bowl or bar)
-    # leaned onto the front finger to the edge of cage_tilt_rad and stalled or toppled. Ground truth on
-    # the push episodes of bench_manip seeds 2 and 3 (with out_of_cage): 3 mm 34 of 60, 1.5 mm 36, none
-    # 42 (docs/experiments.md).
+    # The planner sets it from PlannerConfig.push_cage_margin_m (why none: docs/experiments.md).
     cage_margin_m: float = 0.0
     press_m: float = 0.01
     # Per radian between the finger closing axis and the push direction.
