@@ -38,6 +38,7 @@ from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
+from arm_planner.tasks.grasp import GraspReward
 from arm_planner.twin import TwinObject
 from arm_planner.world_execution import Reobservation, run_in_world
 from arm_reconstruction.checkpoint import default_checkpoint_path
@@ -189,6 +190,11 @@ def run_method(
         if outcome.result is not None and len(outcome.result.step_ms):
             row["mppi_step_ms"] = median(outcome.result.step_ms)
             row["plan_steps"] = len(outcome.result.times_s)
+        reward = getattr(session.planner, "_last_reward", None)
+        if getattr(reward, "grasp_site_moved", False):
+            row["grasp_site_moved"] = True
+        if task == TASK_REARRANGE and reward is not None and not isinstance(reward, GraspReward):
+            row["pushed_ungraspable"] = True
         if session.twin is not None:
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
     finally:
@@ -296,6 +302,18 @@ def main(argv=None) -> int:
         help="push with the open fingers fore and aft of objects that fit between them (else one finger)",
     )
     parser.add_argument(
+        "--grasp-site-search",
+        action=argparse.BooleanOptionalAction,
+        default=PlannerConfig.grasp_site_search,
+        help="grasp where the target's material lies between the fingers when its centre of mass has none there",
+    )
+    parser.add_argument(
+        "--push-ungraspable",
+        action=argparse.BooleanOptionalAction,
+        default=PlannerConfig.push_ungraspable,
+        help="rearrange: push a target that is wider than the open fingers along every axis",
+    )
+    parser.add_argument(
         "--friction",
         type=float,
         default=SLIDING_FRICTION,
@@ -359,6 +377,8 @@ def main(argv=None) -> int:
     config.push_hand_speed_m_s = args.push_hand_speed
     config.push_contact_height_m = args.push_contact_height
     config.push_cage = args.push_cage
+    config.grasp_site_search = args.grasp_site_search
+    config.push_ungraspable = args.push_ungraspable
     config.object_friction = args.friction
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
@@ -402,6 +422,8 @@ def main(argv=None) -> int:
             ("push_contact_height_m", args.push_contact_height, PlannerConfig.push_contact_height_m),
             ("friction", args.friction, SLIDING_FRICTION),
             ("push_cage", args.push_cage, PlannerConfig.push_cage),
+            ("grasp_site_search", args.grasp_site_search, PlannerConfig.grasp_site_search),
+            ("push_ungraspable", args.push_ungraspable, PlannerConfig.push_ungraspable),
             ("only_tasks", run_tasks, args.tasks),
             ("tracker", args.tracker, "perfect"),
         )

@@ -112,6 +112,18 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.clear_fingers = declare(
         node, "clear_fingers", PlannerConfig.clear_fingers, "Grasp: turn the fingers off neighbouring objects"
     )
+    config.grasp_site_search = declare(
+        node,
+        "grasp_site_search",
+        PlannerConfig.grasp_site_search,
+        "Grasp: move to where the target's material lies between the fingers when the centre of mass has none",
+    )
+    config.push_ungraspable = declare(
+        node,
+        "push_ungraspable",
+        PlannerConfig.push_ungraspable,
+        "Rearrange: push a target that is wider than the open fingers along every axis",
+    )
     config.object_friction = declare(
         node, "object_friction", PlannerConfig.object_friction, "Twin: object-table sliding friction", 0.05, 2.0
     )

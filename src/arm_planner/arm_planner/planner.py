@@ -31,8 +31,8 @@ from arm_planner.mppi import (
 from arm_planner.robot_spec import ResolvedRobot, RobotSpec
 from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.tasks.base import RewardWeights, TargetGeometry
-from arm_planner.tasks.grasp import GraspReward
-from arm_planner.tasks.push import CagePushReward, PushReward
+from arm_planner.tasks.grasp import GRASP_STATES, GraspReward
+from arm_planner.tasks.push import PUSH_STATES, CagePushReward, PushReward
 from arm_planner.twin import OVERLAP_EXCLUDE_M
 from arm_sim.world import SLIDING_FRICTION
 
@@ -123,6 +123,13 @@ class PlannerConfig:
     # one. On the 99-episode design's grasp and rearrange episodes over two seeds ground truth gained 2
     # and lost none, `arm` gained 1 and lost 1; turning within 5 mm lost 3 and gained 2 (docs/experiments.md).
     clear_fingers: bool = True
+    # Grasp and rearrange: where the site over the centre of mass has no material between the fingers
+    # (a ring, a torus, a U) or a finger would come down on the target, grasp at the nearest site with
+    # its material squarely between them (grasp_site).
+    grasp_site_search: bool = True
+    # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
+    # every axis to its goal instead of trying to pick it up.
+    push_ungraspable: bool = True
     # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
     # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
     push_contact_height_m: float = 0.018
@@ -267,39 +274,24 @@ class Planner:
             displacement = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
         if request.task in (TASK_GRASP, TASK_REARRANGE):
             carry = self.config.rearrange_carry_height_m if request.task == TASK_REARRANGE else 0.0
+            search = self.config.grasp_site_search
             reward = GraspReward(
                 **common,
                 goal_displacement=displacement,
                 close_steps=self.config.close_steps,
                 carry_height_m=carry,
                 finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
-                fingers=self._open_fingers() if self.config.clear_fingers else None,
+                fingers=self._open_fingers() if self.config.clear_fingers or search else None,
+                clear_fingers=self.config.clear_fingers,
+                search_grasp_site=search,
             )
+            pushed = request.resume_state in PUSH_STATES  # a rearrange re-planned after it became a push
+            if request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable:
+                pushed = request.resume_state not in GRASP_STATES
+            if pushed:
+                reward = self._push_reward(common, target_id, displacement, geometry)
         elif request.task == TASK_PUSH:
-            joint = int(self.model.body_jntadr[target_id])
-            velocity_adr = None
-            if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
-                velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
-            spec = self.robot.spec
-            push = dict(
-                common,
-                goal_displacement=displacement,
-                target_vel_adr=velocity_adr,
-                friction=self.config.object_friction,
-            )
-            cage = self.config.push_cage and CagePushReward.fits_cage(
-                geometry, displacement, spec.finger_gap_open_m, spec.fingertip_to_palm_m
-            )
-            if cage:
-                reward = CagePushReward(
-                    **push,
-                    cage_gap_m=spec.finger_gap_open_m,
-                    cage_margin_m=self.config.push_cage_margin_m,
-                    finger_length_m=spec.fingertip_to_palm_m,
-                    tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
-                )
-            else:
-                reward = PushReward(**push, contact_height_m=self.config.push_contact_height_m)
+            reward = self._push_reward(common, target_id, displacement, geometry)
         else:
             raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
         if request.start_com_world is not None:
@@ -308,6 +300,31 @@ class Planner:
         if request.resume_state:
             reward.resume(request.resume_state, request.resume_steps_in_state)
         return reward
+
+    def _push_reward(self, common: dict, target_id: int, displacement: np.ndarray, geometry: TargetGeometry):
+        """The caging push when the target fits between the open fingers, else the one-finger push."""
+        joint = int(self.model.body_jntadr[target_id])
+        velocity_adr = None
+        if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
+            velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
+        spec = self.robot.spec
+        push = dict(
+            common,
+            goal_displacement=displacement,
+            target_vel_adr=velocity_adr,
+            friction=self.config.object_friction,
+        )
+        if self.config.push_cage and CagePushReward.fits_cage(
+            geometry, displacement, spec.finger_gap_open_m, spec.fingertip_to_palm_m
+        ):
+            return CagePushReward(
+                **push,
+                cage_gap_m=spec.finger_gap_open_m,
+                cage_margin_m=self.config.push_cage_margin_m,
+                finger_length_m=spec.fingertip_to_palm_m,
+                tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
+            )
+        return PushReward(**push, contact_height_m=self.config.push_contact_height_m)
 
     def _open_fingers(self) -> OpenFingers:
         spec = self.robot.spec

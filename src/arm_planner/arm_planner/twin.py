@@ -242,9 +242,9 @@ class Twin:
     def target_geometry(
         self, object_id: int, poses: dict[int, np.ndarray] | None = None, with_halfspaces: bool = True
     ) -> TargetGeometry:
-        """The target's vertices and centre of mass in the world and the other objects' vertices and (if
-        with_halfspaces) convex parts, with objects at `poses` (object id -> T_world_object; objects not
-        in it: as built)."""
+        """The target's vertices, convex parts and centre of mass in the world and the other objects'
+        vertices and (if with_halfspaces) convex parts, with objects at `poses` (object id ->
+        T_world_object; objects not in it: as built)."""
         poses = poses or {}
         geometry = None
         obstacles, obstacle_halfspaces = [], []
@@ -258,6 +258,7 @@ class Twin:
                 continue
             com_world = T[:3, :3] @ self.model.body(self.body_names[object_id]).ipos + T[:3, 3]
             geometry = TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
+            geometry.part_halfspaces = self._halfspaces_world(i, T)
         if geometry is None:
             raise KeyError(f"object {object_id} is not in the twin")
         if obstacles:

@@ -22,6 +22,8 @@ class TargetGeometry:
     obstacle_vertices_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     # Their convex parts as [F, 4] half-spaces (finger_clearance.halfspaces), world frame.
     obstacle_halfspaces: list = field(default_factory=list)
+    # The target's own convex parts, the same way (empty: unknown).
+    part_halfspaces: list = field(default_factory=list)
 
     def vertices_in_target(self) -> np.ndarray:
         """Vertices relative to the centre of mass, in the target body's frame (metres)."""

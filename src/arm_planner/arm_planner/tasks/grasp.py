@@ -16,7 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arm_planner.finger_clearance import OpenFingers, clear_closing_axis
+from arm_planner.grasp_site import find_grasp_site, search_grasp_site
 from arm_planner.tasks.base import TaskReward, angle_down, offsets_along, tilt_beyond, yaw_error
+
+GRASP_STATES = ("ungrasped", "grasping", "grasped")
 
 
 @dataclass
@@ -61,10 +64,17 @@ class GraspReward(TaskReward):
     # the object's inertia pushes on a finger, across it, it swings about the grip.
     finger_gap_open_m: float = 0.0
     carry_closing_margin_m: float = 0.01
-    # The open fingers (None: unknown). A closing axis that would land a finger on another object is
-    # turned, as little as it takes, to one where both fingers come down clear of it and the object
-    # fits between them with carry_closing_margin_m each side (finger_clearance).
+    # The open fingers (None: unknown). With clear_fingers, a closing axis that would land a finger on
+    # another object is turned, as little as it takes, to one where both fingers come down clear of it
+    # and the object fits between them with carry_closing_margin_m each side (finger_clearance).
     fingers: OpenFingers | None = None
+    clear_fingers: bool = True
+    # Where the default site over the centre of mass has no material between the fingers (a ring, a
+    # torus, a U) or a finger comes down on the target, grasp at the nearest site that holds it
+    # squarely (grasp_site).
+    search_grasp_site: bool = True
+    grasp_site_moved: bool = False
+    grasp_site_holds: bool = True  # False: neither the default site nor any other holds the target
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
@@ -78,14 +88,30 @@ class GraspReward(TaskReward):
         z = np.clip(g.com_world[2], g.top_z - self.grasp_max_depth_m, g.top_z - self.grasp_min_depth_m)
         z = max(g.table_height_m + 0.015, float(z))
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
-        self.grasp_offset = self.grasp_point - g.com_world
         self.closing_axis = self.geometry.minor_axis_xy()
-        if self.carry_height_m > 0 and self.finger_gap_open_m > 0:
+        if self.fingers is not None and self.search_grasp_site:
+            site = find_grasp_site(
+                self.grasp_point,
+                self.closing_axis,
+                g.com_world,
+                g.vertices_world,
+                g.part_halfspaces,
+                self.fingers,
+                g.table_height_m,
+                self.grasp_min_depth_m,
+                self.grasp_max_depth_m,
+                g.obstacle_halfspaces,
+            )
+            self.grasp_point, self.closing_axis = site.point_world, site.axis_xy
+            self.grasp_site_moved, self.grasp_site_holds = site.moved, site.holds
+        self.grasp_offset = self.grasp_point - g.com_world
+        # A moved site's axis already holds the target squarely and clears the other objects.
+        if not self.grasp_site_moved and self.carry_height_m > 0 and self.finger_gap_open_m > 0:
             carry = np.append(self.goal_displacement[:2], 0.0)
             carry /= np.linalg.norm(carry) + 1e-9
             if self._fits_between(carry[:2], self.finger_gap_open_m):
                 self.closing_axis = carry
-        if self.fingers is not None:
+        if self.fingers is not None and self.clear_fingers and not self.grasp_site_moved:
             self.closing_axis = clear_closing_axis(
                 self.grasp_point,
                 self.closing_axis,
@@ -96,6 +122,31 @@ class GraspReward(TaskReward):
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
+
+    @property
+    def ungraspable(self) -> bool:
+        """The target is wider than the open fingers along every horizontal axis (12 over half a turn)
+        and no site on it has its material squarely between them (grasp_site): a parallel gripper
+        cannot pick it up."""
+        if self.fingers is None or not self.fingers.known or self.grasp_site_moved:
+            return False
+        if not self.grasp_site_holds:
+            return True
+        g = self.geometry
+        angles = np.pi * np.arange(12) / 12
+        widths = [np.ptp(offsets_along(g, np.array([np.cos(a), np.sin(a)]))) for a in angles]
+        if min(widths) <= self.fingers.gap_m or not g.part_halfspaces:
+            return False
+        site = search_grasp_site(
+            g.com_world,
+            g.vertices_world,
+            g.part_halfspaces,
+            self.fingers,
+            g.table_height_m,
+            self.grasp_min_depth_m,
+            self.grasp_max_depth_m,
+        )
+        return site is None
 
     def _fits_between(self, axis_xy: np.ndarray, gap_m: float) -> bool:
         """The target fits between fingers gap_m apart (m) closing along axis_xy, with
@@ -123,7 +174,7 @@ class GraspReward(TaskReward):
 
     def resume(self, state: str, steps_in_state: int) -> None:
         """Continue a task already under way (re-planning): grasping for `steps_in_state` steps, or grasped."""
-        if state not in ("ungrasped", "grasping", "grasped"):
+        if state not in GRASP_STATES:
             raise ValueError(f"cannot resume a grasp in state {state!r}")
         self.state = state
         self._closing_since = self.step_count - int(steps_in_state)

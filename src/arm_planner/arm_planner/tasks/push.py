@@ -10,6 +10,8 @@ import numpy as np
 
 from arm_planner.tasks.base import TargetGeometry, TaskReward, angle_down, offsets_along, yaw_error
 
+PUSH_STATES = ("approaching", "pushing")
+
 
 @dataclass
 class PushReward(TaskReward):
@@ -68,7 +70,7 @@ class PushReward(TaskReward):
         return True
 
     def resume(self, state: str, steps_in_state: int) -> None:
-        if state not in ("approaching", "pushing"):
+        if state not in PUSH_STATES:
             raise ValueError(f"cannot resume a push in state {state!r}")
         self.state = state
         self.near_contact = state == "pushing"
