@@ -28,6 +28,21 @@ class GraspSite:
 
 
 @dataclass(frozen=True)
+class GraspTarget:
+    """What the search needs of the target (world frame, metres): its centre of mass, its convex parts
+    (half-spaces) and their vertices, the table height, the TCP's depth band below the target's top,
+    and the other objects' convex parts (None: not checked)."""
+
+    com_world: np.ndarray
+    vertices_world: np.ndarray
+    part_halfspaces: list
+    table_height_m: float
+    min_depth_m: float
+    max_depth_m: float
+    obstacle_halfspaces: list | None = None
+
+
+@dataclass(frozen=True)
 class Occupancy:
     """Which voxels (edge voxel_m, metres) of a box starting at origin_world lie inside the target."""
 
@@ -97,46 +112,21 @@ def default_site_holds(
 
 
 def find_grasp_site(
-    default_point_world: np.ndarray,
-    default_axis_xy: np.ndarray,
-    com_world: np.ndarray,
-    vertices_world: np.ndarray,
-    part_halfspaces: list[np.ndarray],
-    fingers: OpenFingers,
-    table_height_m: float,
-    min_depth_m: float,
-    max_depth_m: float,
-    obstacle_halfspaces: list[np.ndarray] | None = None,
+    default_point_world: np.ndarray, default_axis_xy: np.ndarray, target: GraspTarget, fingers: OpenFingers
 ) -> GraspSite:
     """The default site when it holds (default_site_holds), else the nearest site that does
     (search_grasp_site); the default, marked as not holding, when none does."""
     default = GraspSite(np.asarray(default_point_world, dtype=np.float64), np.asarray(default_axis_xy), False)
-    if not fingers.known or not part_halfspaces or len(vertices_world) == 0:
+    if not fingers.known or not target.part_halfspaces or len(target.vertices_world) == 0:
         return default
-    if default_site_holds(default.point_world, default.axis_xy, fingers, part_halfspaces):
+    if default_site_holds(default.point_world, default.axis_xy, fingers, target.part_halfspaces):
         return default
-    site = search_grasp_site(
-        com_world,
-        vertices_world,
-        part_halfspaces,
-        fingers,
-        table_height_m,
-        min_depth_m,
-        max_depth_m,
-        obstacle_halfspaces,
-    )
-    return site or dataclasses.replace(default, holds=False)
+    return search_grasp_site(target, fingers) or dataclasses.replace(default, holds=False)
 
 
 def search_grasp_site(
-    com_world: np.ndarray,
-    vertices_world: np.ndarray,
-    part_halfspaces: list[np.ndarray],
+    target: GraspTarget,
     fingers: OpenFingers,
-    table_height_m: float,
-    min_depth_m: float,
-    max_depth_m: float,
-    obstacle_halfspaces: list[np.ndarray] | None = None,
     spacing_m: float = 0.01,
     axes: int = 12,
     voxel_m: float = 0.004,
@@ -148,9 +138,11 @@ def search_grasp_site(
     the fingers) whose open fingers come down clear of the target with its material squarely between
     them, preferring one whose fingers clear the other objects; None when none qualifies (the target
     is wider than the gap wherever its material lies between the fingers). A site's TCP height is the
-    centre of mass's, kept between min_depth_m and max_depth_m below the target's top under the
-    fingers and above_table_m above the table. vertices_world: the parts' vertices (their bounds set
-    the search box)."""
+    centre of mass's, kept within the target's depth band below its top under the fingers and
+    above_table_m above the table."""
+    com_world, vertices_world, part_halfspaces = target.com_world, target.vertices_world, target.part_halfspaces
+    if not fingers.known or not part_halfspaces or len(vertices_world) == 0:
+        return None
     lo, hi = vertices_world.min(axis=0) - voxel_m, vertices_world.max(axis=0) + voxel_m
     occupancy = Occupancy.from_parts(part_halfspaces, lo, hi, voxel_m)
     levels = occupancy.origin_world[2] + voxel_m * (np.arange(occupancy.filled.shape[2]) + 0.5)  # [Z]
@@ -169,7 +161,8 @@ def search_grasp_site(
     has_material = has_level.any(axis=-1)
     top_index = np.argmax(np.where(has_level, np.arange(len(levels)), -1), axis=-1)
     top = np.where(has_material, levels[top_index] + 0.5 * voxel_m, -np.inf)
-    z = np.maximum(np.clip(com_world[2], top - max_depth_m, top - min_depth_m), table_height_m + above_table_m)
+    z = np.clip(com_world[2], top - target.max_depth_m, top - target.min_depth_m)
+    z = np.maximum(z, target.table_height_m + above_table_m)
     tip = z - fingers.tcp_above_tip_m
     band = (levels >= tip[..., None] - 0.5 * voxel_m) & (levels <= z[..., None] + 0.01)  # [P, A, Z]
     held = (between & band[:, :, None, :]).any(axis=-1)
@@ -201,8 +194,8 @@ def search_grasp_site(
         point = np.array([*points_xy[p_index[i]], z[p_index[i], a_index[i]]])
         site = GraspSite(point, np.append(axes_xy[a_index[i]], 0.0), True)
         best = best or site
-        if not obstacle_halfspaces:
+        if not target.obstacle_halfspaces:
             return site
-        if clearance_m(finger_points(point, site.axis_xy, fingers), obstacle_halfspaces) >= 0:
+        if clearance_m(finger_points(point, site.axis_xy, fingers), target.obstacle_halfspaces) >= 0:
             return site
     return best

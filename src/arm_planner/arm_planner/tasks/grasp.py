@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arm_planner.finger_clearance import OpenFingers, clear_closing_axis
-from arm_planner.grasp_site import find_grasp_site, search_grasp_site
+from arm_planner.grasp_site import GraspTarget, find_grasp_site, search_grasp_site
 from arm_planner.tasks.base import TaskReward, angle_down, offsets_along, tilt_beyond, yaw_error
 
 GRASP_STATES = ("ungrasped", "grasping", "grasped")
@@ -90,18 +90,7 @@ class GraspReward(TaskReward):
         self.grasp_point = np.array([g.com_world[0], g.com_world[1], z])
         self.closing_axis = self.geometry.minor_axis_xy()
         if self.fingers is not None and self.search_grasp_site:
-            site = find_grasp_site(
-                self.grasp_point,
-                self.closing_axis,
-                g.com_world,
-                g.vertices_world,
-                g.part_halfspaces,
-                self.fingers,
-                g.table_height_m,
-                self.grasp_min_depth_m,
-                self.grasp_max_depth_m,
-                g.obstacle_halfspaces,
-            )
+            site = find_grasp_site(self.grasp_point, self.closing_axis, self._grasp_target(), self.fingers)
             self.grasp_point, self.closing_axis = site.point_world, site.axis_xy
             self.grasp_site_moved, self.grasp_site_holds = site.moved, site.holds
         self.grasp_offset = self.grasp_point - g.com_world
@@ -123,6 +112,18 @@ class GraspReward(TaskReward):
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
 
+    def _grasp_target(self) -> GraspTarget:
+        g = self.geometry
+        return GraspTarget(
+            g.com_world,
+            g.vertices_world,
+            g.part_halfspaces,
+            g.table_height_m,
+            self.grasp_min_depth_m,
+            self.grasp_max_depth_m,
+            g.obstacle_halfspaces,
+        )
+
     @property
     def ungraspable(self) -> bool:
         """The target is wider than the open fingers along every horizontal axis (12 over half a turn)
@@ -130,23 +131,11 @@ class GraspReward(TaskReward):
         cannot pick it up."""
         if self.fingers is None or not self.fingers.known or self.grasp_site_moved:
             return False
-        if not self.grasp_site_holds:
-            return True
-        g = self.geometry
         angles = np.pi * np.arange(12) / 12
-        widths = [np.ptp(offsets_along(g, np.array([np.cos(a), np.sin(a)]))) for a in angles]
-        if min(widths) <= self.fingers.gap_m or not g.part_halfspaces:
+        widths = [np.ptp(offsets_along(self.geometry, np.array([np.cos(a), np.sin(a)]))) for a in angles]
+        if min(widths) <= self.fingers.gap_m:
             return False
-        site = search_grasp_site(
-            g.com_world,
-            g.vertices_world,
-            g.part_halfspaces,
-            self.fingers,
-            g.table_height_m,
-            self.grasp_min_depth_m,
-            self.grasp_max_depth_m,
-        )
-        return site is None
+        return not self.grasp_site_holds or search_grasp_site(self._grasp_target(), self.fingers) is None
 
     def _fits_between(self, axis_xy: np.ndarray, gap_m: float) -> bool:
         """The target fits between fingers gap_m apart (m) closing along axis_xy, with
