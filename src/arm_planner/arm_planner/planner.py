@@ -410,7 +410,8 @@ class Planner:
         )
         met_streak, met, error, held = 0, False, float("inf"), False
         message = "step budget used"
-        budget = int(cfg.task_steps.get(request.task) or cfg.mppi.steps)
+        planned_as = TASK_PUSH if isinstance(reward, PushReward) else request.task  # a rearrange may be a push
+        budget = int(cfg.task_steps.get(planned_as) or cfg.mppi.steps)
         for step in range(budget):
             if should_stop is not None and should_stop():
                 message = "stopped"

@@ -161,12 +161,16 @@ def test_a_torus_is_grasped_by_its_tube_and_lifted():
 
 
 def test_a_box_wider_than_the_open_fingers_is_rearranged_by_pushing_it():
+    """Planned as a push, with the push's step budget (the rearrange's, 100 here, is too short for it)."""
     scene = _external(trimesh.creation.box((0.15, 0.15, 0.06)), "wide_box")
-    session = ManipulationSession(PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0)), 0.01)
+    budgets = {"rearrange": 100, "push": 750}
+    config = PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0), task_steps=budgets)
+    session = ManipulationSession(config, 0.01)
     world = SimWorld(scene, robot_arm=True)
     goal = (0.05, -0.2, 0.0)
     run = run_in_world(session, world, ground_truth_objects(scene), 0.0, 0, "rearrange", goal, 0.025, 5)
     assert isinstance(session.planner._last_reward, PushReward), "no grasp site holds a 15 cm box"
     assert run.success, (run.error_m, run.outcome.message)
+    assert len(run.outcome.result.times_s) > budgets["rearrange"]
     session.close()
     world.close()
