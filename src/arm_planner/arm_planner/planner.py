@@ -285,9 +285,12 @@ class Planner:
                 clear_fingers=self.config.clear_fingers,
                 search_grasp_site=search,
             )
-            pushed = request.resume_state in PUSH_STATES  # a rearrange re-planned after it became a push
-            if request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable:
-                pushed = request.resume_state not in GRASP_STATES
+            if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push
+                pushed = True
+            elif request.resume_state in GRASP_STATES:
+                pushed = False
+            else:
+                pushed = request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable
             if pushed:
                 reward = self._push_reward(common, target_id, displacement, geometry)
         elif request.task == TASK_PUSH:
