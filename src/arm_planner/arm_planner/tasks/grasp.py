@@ -78,7 +78,7 @@ class GraspReward(TaskReward):
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
-    _closing_hand_pos: np.ndarray | None = None
+    _closing_hold: np.ndarray | None = None  # where the hand holds while the fingers close (world, m)
     _grasped_since: int = 0
 
     def __post_init__(self):
@@ -194,10 +194,10 @@ class GraspReward(TaskReward):
         w = self.weights
         target_pos, hands = self.rollout_poses(states, controls)
         grasp_point = target_pos + self.grasp_offset
-        if self.state == "grasping" and self._closing_hand_pos is not None:
-            # The hand holds where the fingers began to close: chasing an object that a finger nudges
-            # drags it away (and tips it) before the grip forms.
-            grasp_point = np.broadcast_to(self._closing_hand_pos, grasp_point.shape)
+        if self.state == "grasping" and self._closing_hold is not None:
+            # The hand holds the grasp site as it was when the fingers began to close: chasing an
+            # object that a finger nudges drags it away (and tips it) before the grip forms.
+            grasp_point = np.broadcast_to(self._closing_hold, grasp_point.shape)
         if self.state == "grasped":
             # The hand stays with the object. A rearrange scores it on the simulated hand only: the
             # commanded one sits above the held object by the arm's sag under load, and pulling it onto
@@ -241,10 +241,13 @@ class GraspReward(TaskReward):
             if not still_ungrasped and distance <= self.max_close_distance_m:
                 self.state = "grasping"
                 self._closing_since = n
-                self._closing_hand_pos = hand_pos[0].copy()
+                # The site, not the hand: the fingers begin to close up to max_close_distance_m
+                # short of it (the hand still coming down), and holding there a lamp 6 cm tall on a
+                # 2 cm base was knocked over by the closing fingers.
+                self._closing_hold = target_pos[0] + self.grasp_offset
         elif self.state == "grasping":
-            if self._closing_hand_pos is None:  # resumed mid-close
-                self._closing_hand_pos = hand_pos[0].copy()
+            if self._closing_hold is None:  # resumed mid-close: the fingers may already hold it
+                self._closing_hold = hand_pos[0].copy()
             if self.step_count - self._closing_since >= self.close_steps:
                 self.state = "grasped"
                 self._grasped_since = self.step_count
