@@ -6,10 +6,16 @@ from arm_planner.tasks.base import TargetGeometry, tilt_beyond
 from arm_planner.tasks.grasp import GraspReward
 
 
-def test_the_hand_holds_still_while_the_fingers_close_on_a_nudged_object():
+def _box_grasp() -> GraspReward:
+    """A grasp of a 4 x 4 x 8 cm box; hand position in qpos[0:3], box centre in qpos[3:6]."""
     box = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (0.0, 0.08)])
     geometry = TargetGeometry(np.array([0.0, 0.0, 0.04]), box, 0.0)
-    reward = GraspReward(hand=poses_from(0), target=poses_from(3), geometry=geometry, qpos_offset=0, nq=6)
+    return GraspReward(hand=poses_from(0), target=poses_from(3), geometry=geometry, qpos_offset=0, nq=6)
+
+
+def test_the_hand_holds_still_while_the_fingers_close_on_a_nudged_object():
+    reward = _box_grasp()
+    geometry = reward.geometry
     at_rest = np.concatenate([reward.grasp_point, geometry.com_world])
     while reward.state == "ungrasped":
         reward.update(at_rest)
@@ -24,6 +30,19 @@ def test_the_hand_holds_still_while_the_fingers_close_on_a_nudged_object():
     assert reward.state == "grasped"
     scores = reward(np.stack([holding, chasing]), np.zeros((2, 0)))
     assert scores[1] > scores[0], "grasped, the hand goes with the object again"
+
+
+def test_fingers_closing_short_of_the_site_hold_the_site_not_the_hand():
+    reward = _box_grasp()
+    geometry = reward.geometry
+    above = reward.grasp_point + [0.0, 0.0, 0.008]  # within close_distance_m, still coming down
+    arriving = np.concatenate([above, geometry.com_world])
+    while reward.state == "ungrasped":
+        reward.update(arriving)
+        assert reward.step_count < 50
+    at_site = np.concatenate([reward.grasp_point, geometry.com_world])
+    scores = reward(np.stack([at_site, arriving]), np.zeros((2, 0)))
+    assert scores[0] > scores[1], "closing, the hand goes on to the site rather than staying short of it"
 
 
 def _grasp_on(com_z: float, top_z: float) -> GraspReward:

@@ -231,7 +231,8 @@ class GraspReward(TaskReward):
     def update(self, state: np.ndarray) -> str:
         """Advance the state machine on the executed state; returns the new state name."""
         hand_pos, _, target_pos, _ = self.poses(state[None])
-        distance = float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.grasp_offset)))
+        site = target_pos[0] + self.grasp_offset
+        distance = float(np.linalg.norm(hand_pos[0] - site))
         self._history.append(distance)
         self.step_count += 1
         if self.state == "ungrasped":
@@ -244,7 +245,7 @@ class GraspReward(TaskReward):
                 # The site, not the hand: the fingers begin to close up to max_close_distance_m
                 # short of it (the hand still coming down), and holding there a lamp 6 cm tall on a
                 # 2 cm base was knocked over by the closing fingers.
-                self._closing_hold = target_pos[0] + self.grasp_offset
+                self._closing_hold = site
         elif self.state == "grasping":
             if self._closing_hold is None:  # resumed mid-close: the fingers may already hold it
                 self._closing_hold = hand_pos[0].copy()
