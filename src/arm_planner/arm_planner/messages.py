@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
-from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from arm_interfaces.action import Manipulate
@@ -13,6 +12,7 @@ from arm_planner.twin import TwinObject
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.meshes import msg_to_mesh
 from arm_ros.conversions.poses import pose_to_matrix
+from arm_ros.conversions.stamps import seconds_to_duration
 
 TASK_NAMES = {
     Manipulate.Goal.TASK_GRASP: TASK_GRASP,
@@ -80,9 +80,7 @@ def trajectory_msg(joint_names, times_s: np.ndarray, positions: np.ndarray, head
         msg.header = header
     msg.joint_names = list(joint_names)
     for t, q in zip(np.asarray(times_s, dtype=np.float64), np.asarray(positions, dtype=np.float64), strict=True):
-        sec = int(np.floor(t))
-        point = JointTrajectoryPoint(positions=q.tolist())
-        point.time_from_start = Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+        point = JointTrajectoryPoint(positions=q.tolist(), time_from_start=seconds_to_duration(float(t)))
         msg.points.append(point)
     return msg
 

@@ -52,6 +52,16 @@ def test_trajectory_message_times_and_positions():
     assert list(msg.points[1].positions) == [2.0, 3.0]
 
 
+def test_trajectory_message_times_just_below_a_whole_second_stay_increasing():
+    # a streamed part's times are plan times less the time executed: 0.02 * 50 - 0.16 is 0.9999999999999999
+    times = 0.02 * np.arange(1, 60)[8:] - 0.16
+    msg = trajectory_msg(["a"], times, np.zeros((len(times), 1)))
+    ns = [p.time_from_start.sec * 1_000_000_000 + p.time_from_start.nanosec for p in msg.points]
+    assert np.all(np.diff(ns) > 0)
+    one_second = msg.points[int(np.argmin(np.abs(times - 1.0)))].time_from_start
+    assert (one_second.sec, one_second.nanosec) == (1, 0)
+
+
 def test_joint_states_are_checked():
     names = ["j1", "j2", "f"]
     q, opening = joint_state_arrays(JointState(name=names, position=[0.1, 0.2, 0.03]), ["j2", "j1"], "f")

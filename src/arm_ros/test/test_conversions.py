@@ -23,7 +23,7 @@ from arm_ros.conversions.meshes import (
     reconstructed_object_msg,
 )
 from arm_ros.conversions.poses import matrix_to_pose, pose_to_matrix
-from arm_ros.conversions.stamps import ns_to_time, time_ns
+from arm_ros.conversions.stamps import ns_to_time, seconds_to_duration, time_ns
 
 
 def test_images_round_trip():
@@ -159,3 +159,12 @@ def test_stamps_round_trip_exactly_through_nanoseconds():
     stamp = ns_to_time(ns)
     assert (stamp.sec, stamp.nanosec) == (1_732_000_000, 123_456_789) and time_ns(stamp) == ns
     assert time_ns(ns_to_time(-5)) == 0
+
+
+def test_durations_round_to_whole_nanoseconds():
+    assert (seconds_to_duration(1.5).sec, seconds_to_duration(1.5).nanosec) == (1, 500_000_000)
+    below_one = seconds_to_duration(0.9999999999999999)
+    assert (below_one.sec, below_one.nanosec) == (1, 0)
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            seconds_to_duration(bad)
