@@ -11,7 +11,7 @@ from arm_sim.appearance import DEFAULT_DOMAIN
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SimWorld
+from arm_sim.world import SERVO_PERIOD_S, SimWorld
 
 COMMAND_NAMES = tuple(robot.JOINT_NAMES) + (robot.FINGER_JOINT_NAMES[0],)
 
@@ -41,18 +41,40 @@ class SimSession:
         self.T_world_camera = look_at(camera_eye, camera_target)
         self.noise = DepthNoise(enabled=bool(depth_noise))
         self.time_s = 0.0
+        self._targets = np.zeros((0, len(COMMAND_NAMES)))  # servo targets still to take, one per SERVO_PERIOD_S
+        self._next_servo_s = 0.0
 
     def command(self) -> np.ndarray:
         """The current servo targets: 7 joint angles (rad) and the finger opening (m)."""
         return self.world.data.ctrl[:8].copy()
 
-    def step(self, dt_s: float, target: np.ndarray | None = None) -> None:
-        if target is not None:
-            lo, hi = self.world.model.actuator_ctrlrange[:8].T
-            self.world.data.ctrl[:8] = np.clip(target, lo, hi)
-        substeps = max(1, int(round(dt_s / self.world.model.opt.timestep)))
-        mujoco.mj_step(self.world.model, self.world.data, nstep=substeps)
-        self.time_s += substeps * self.world.model.opt.timestep
+    def follow(self, joint_names, times_s, positions) -> int:
+        """Replace the trajectory the servos follow (times from now, s; positions per joint in
+        joint_names, interpolated from the current command at SERVO_PERIOD_S): the number of servo
+        targets queued. Raises ValueError (trajectory_targets) and keeps the old trajectory then."""
+        self._targets = trajectory_targets(joint_names, times_s, positions, self.command(), SERVO_PERIOD_S)
+        self._next_servo_s = self.time_s
+        return len(self._targets)
+
+    @property
+    def following(self) -> bool:
+        return len(self._targets) > 0
+
+    def step(self, dt_s: float) -> None:
+        """Advance dt_s of simulated time; every SERVO_PERIOD_S the servos take the followed trajectory's
+        next target (after its end they hold the last one), as SimWorld.execute drives them."""
+        model, data = self.world.model, self.world.data
+        end_s = self.time_s + dt_s
+        while self.time_s < end_s - 1e-9:
+            if len(self._targets) and self.time_s >= self._next_servo_s - 1e-9:
+                lo, hi = model.actuator_ctrlrange[:8].T
+                data.ctrl[:8] = np.clip(self._targets[0], lo, hi)
+                self._targets = self._targets[1:]
+                self._next_servo_s += SERVO_PERIOD_S
+            until_s = min(end_s, self._next_servo_s) if len(self._targets) else end_s
+            substeps = max(1, int(round((until_s - self.time_s) / model.opt.timestep)))
+            mujoco.mj_step(model, data, nstep=substeps)
+            self.time_s += substeps * model.opt.timestep
 
     def render(self):
         start = time.perf_counter()

@@ -26,7 +26,7 @@ from arm_ros.conversions.meshes import reconstructed_object_msg
 from arm_ros.conversions.poses import matrix_to_pose
 from arm_sim import robot
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
-from arm_sim.core import SimSession, trajectory_targets
+from arm_sim.core import SimSession
 
 
 class SimNode(Node):
@@ -86,10 +86,10 @@ class SimNode(Node):
         self.pub_truth = self.create_publisher(ReconstructedObjectArray, "sim/ground_truth/objects", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_subscription(JointTrajectory, "arm/joint_trajectory", self.on_trajectory, 10)
-        self._targets = None  # (N, 8) control targets, one per physics tick
         self._next_render_s = 0.0
         self._render_ms = 0.0
         self.frames_published = 0
+        self.trajectories_followed = self.trajectories_rejected = 0
         # the sim is the clock source: it ticks on the steady clock, also when run with use_sim_time:=true
         self.create_timer(1.0 / self.physics_rate_hz, self.on_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_ground_truth()
@@ -108,18 +108,15 @@ class SimNode(Node):
         try:
             times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points]
             positions = [list(p.positions) for p in msg.points]
-            self._targets = trajectory_targets(
-                msg.joint_names, times, positions, self.session.command(), 1.0 / self.physics_rate_hz
-            )
-            self.get_logger().info(f"executing trajectory: {len(msg.points)} points, {len(self._targets)} ticks")
+            targets = self.session.follow(msg.joint_names, times, positions)
+            self.trajectories_followed += 1
+            self.get_logger().info(f"executing trajectory: {len(msg.points)} points, {targets} servo targets")
         except ValueError as error:
+            self.trajectories_rejected += 1
             self.errors.error("bad_trajectory", f"rejected trajectory: {error}")
 
     def on_tick(self) -> None:
-        target = None
-        if self._targets is not None and len(self._targets):
-            target, self._targets = self._targets[0], self._targets[1:]
-        self.session.step(1.0 / self.physics_rate_hz, target)
+        self.session.step(1.0 / self.physics_rate_hz)
         self.pub_clock.publish(ClockMsg(clock=self.stamp()))
         self.publish_joint_state()
         if self.session.time_s + 1e-9 >= self._next_render_s:
@@ -155,6 +152,8 @@ class SimNode(Node):
                     "render_ms": render_ms,
                     "frames_published": self.frames_published,
                     "sim_time_s": self.session.time_s,
+                    "trajectories_followed": self.trajectories_followed,
+                    "trajectories_rejected": self.trajectories_rejected,
                 },
             )
         )

@@ -12,6 +12,9 @@ from arm_sim.depth_noise import DepthNoise, SensorArtefacts, apply_depth_noise, 
 
 RENDER_CAMERA = "render_camera"
 ROBOT_BASE_XY = (-0.55, 0.0)
+# The position servos take a new target this often (s): trajectories are interpolated at this rate, as a
+# joint trajectory controller updates its command (the planner's twin ramps its targets per 0.01 s step too).
+SERVO_PERIOD_S = 0.01
 OBJECT_DENSITY_KG_M3 = 600.0
 # Sliding friction between objects and the table (and between objects); MuJoCo takes the larger of
 # two geoms' coefficients. 0.9 is high for household objects on a table (0.3-0.6 is typical): at
@@ -225,7 +228,7 @@ class SimWorld:
     def joint_velocities(self) -> np.ndarray:
         return np.concatenate([self.data.qvel[self._joint_dof], [0.0]])
 
-    def execute(self, times_s: np.ndarray, positions: np.ndarray, control_dt_s: float = 0.01) -> None:
+    def execute(self, times_s: np.ndarray, positions: np.ndarray, control_dt_s: float = SERVO_PERIOD_S) -> None:
         """Track a joint trajectory (times from now, positions (N,8): 7 joints + finger opening) with
         the position servos, interpolated every control_dt_s; physics runs in C between updates."""
         times_s, positions = np.asarray(times_s, float), np.asarray(positions, float)

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from arm_sim.core import COMMAND_NAMES, trajectory_targets
+from arm_sim.core import COMMAND_NAMES, SimSession, trajectory_targets
+from arm_sim.world import SERVO_PERIOD_S
 
 
 def test_trajectory_targets_interpolate_and_validate():
@@ -18,3 +19,25 @@ def test_trajectory_targets_interpolate_and_validate():
     ]:
         with pytest.raises(ValueError):
             trajectory_targets(names, times, positions, current, 0.1)
+
+
+
+def test_the_sim_session_follows_a_trajectory_as_the_world_executes_it():
+    """sim_node's controller (SimSession.follow, then steps of one physics tick) and SimWorld.execute
+    (the benchmarks' executor, the twin's control ramp) drive the servos alike: the same state at the end."""
+    node_side, world_side = SimSession(seed=3, n_objects=3), SimSession(seed=3, n_objects=3)
+    start = node_side.command()
+    times = np.array([0.3, 0.6])
+    positions = np.vstack([start + 0.2, start - 0.1])
+    positions[:, 7] = start[7]
+    assert node_side.follow(COMMAND_NAMES, times, positions) == round(0.6 / SERVO_PERIOD_S)
+    while node_side.following:
+        node_side.step(0.02)
+    world_side.world.execute(times, positions)
+    np.testing.assert_array_equal(node_side.world.data.qpos, world_side.world.data.qpos)
+    with pytest.raises(ValueError):
+        node_side.follow(COMMAND_NAMES[:1], [0.5, 0.2], [[0.0], [0.0]])
+    node_side.step(0.02)
+    np.testing.assert_allclose(node_side.command(), positions[-1])
+    node_side.close()
+    world_side.close()
