@@ -272,10 +272,11 @@ class PlanNode(Node):
         return latest, followed
 
     def _stream_part(self, stream: TrajectoryStream, joint_names) -> None:
-        part = stream.part(1e-9 * self.get_clock().now().nanoseconds)
+        now = self.get_clock().now()  # one reading: the part's times count from its stamp
+        part = stream.part(1e-9 * now.nanoseconds)
         if part is not None and self.execute_plans:
             msg = trajectory_msg(joint_names, part.times_s, part.positions)
-            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.stamp = now.to_msg()
             self.pub_trajectory.publish(msg)
 
     def _plan_once(

@@ -48,11 +48,16 @@ class SimSession:
         """The current servo targets: 7 joint angles (rad) and the finger opening (m)."""
         return self.world.data.ctrl[:8].copy()
 
-    def follow(self, joint_names, times_s, positions) -> int:
-        """Replace the trajectory the servos follow (times from now, s; positions per joint in
-        joint_names, interpolated from the current command at SERVO_PERIOD_S): the number of servo
-        targets queued. Raises ValueError (trajectory_targets) and keeps the old trajectory then."""
-        self._targets = trajectory_targets(joint_names, times_s, positions, self.command(), SERVO_PERIOD_S)
+    def follow(self, joint_names, times_s, positions, start_s: float | None = None) -> int:
+        """Replace the trajectory the servos follow (times from start_s, simulated s; None: from now;
+        positions per joint in joint_names, interpolated from the current command at SERVO_PERIOD_S):
+        the number of servo targets queued. Parts of one plan sent as it is planned share one time
+        base, so a part that arrives a tick late continues the plan instead of repeating a tick. Raises
+        ValueError (trajectory_targets) and keeps the old trajectory then."""
+        started_s_ago = 0.0 if start_s is None else self.time_s - float(start_s)
+        self._targets = trajectory_targets(
+            joint_names, times_s, positions, self.command(), SERVO_PERIOD_S, started_s_ago=started_s_ago
+        )
         self._next_servo_s = self.time_s
         return len(self._targets)
 
@@ -102,10 +107,19 @@ class SimSession:
 
 
 def trajectory_targets(
-    joint_names, times_s, positions, current: np.ndarray, dt_s: float, max_duration_s: float = 120.0
+    joint_names,
+    times_s,
+    positions,
+    current: np.ndarray,
+    dt_s: float,
+    max_duration_s: float = 120.0,
+    started_s_ago: float = 0.0,
 ) -> np.ndarray:
     """Per-tick servo targets (N, 8) that linearly interpolate a joint trajectory from the current
-    command. Joints missing from joint_names keep their current target. Raises ValueError."""
+    command, the first tick dt_s from now. Joints missing from joint_names keep their current target.
+    started_s_ago: how long ago the trajectory's time zero was (its header stamp, ROS semantics): > 0
+    skips what is already past (every point past: the last point), < 0 holds the current command until
+    it starts. Raises ValueError."""
     names = list(joint_names)
     unknown = [n for n in names if n not in COMMAND_NAMES]
     if unknown:
@@ -121,7 +135,12 @@ def trajectory_targets(
     columns = [COMMAND_NAMES.index(n) for n in names]
     full = np.tile(current, (len(times_s), 1))
     full[:, columns] = positions
-    knots_t = np.concatenate([[0.0], times_s])
-    knots_q = np.vstack([current, full])
-    ticks = np.arange(dt_s, times_s[-1] + 1e-9, dt_s)
+    ahead = times_s - started_s_ago
+    future = ahead > 1e-9
+    if not future.any():
+        return full[-1:].copy()
+    hold = [-started_s_ago] if started_s_ago < 0 else []
+    knots_t = np.concatenate([[0.0], hold, ahead[future]])
+    knots_q = np.vstack([current] * (1 + len(hold)) + [full[future]])
+    ticks = np.arange(dt_s, knots_t[-1] + 1e-9, dt_s)
     return np.stack([np.interp(ticks, knots_t, knots_q[:, k]) for k in range(knots_q.shape[1])], axis=1)

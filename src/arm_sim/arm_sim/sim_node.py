@@ -24,9 +24,14 @@ from arm_ros.common import (
 from arm_ros.conversions.images import camera_info_from_K, numpy_to_image
 from arm_ros.conversions.meshes import reconstructed_object_msg
 from arm_ros.conversions.poses import matrix_to_pose
+from arm_ros.conversions.stamps import time_ns
+from arm_ros.goal_activity import declare_goal_pause
 from arm_sim import robot
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.core import SimSession
+
+# A trajectory stamped further than this from the sim clock (s) starts on arrival instead.
+STAMP_TOLERANCE_S = 5.0
 
 
 class SimNode(Node):
@@ -90,6 +95,8 @@ class SimNode(Node):
         self._render_ms = 0.0
         self.frames_published = 0
         self.trajectories_followed = self.trajectories_rejected = 0
+        # rendering shares the CPU with the planner (a real camera does not); segmentation drops frames then too
+        self.goals = declare_goal_pause(self, "rendering camera frames")
         # the sim is the clock source: it ticks on the steady clock, also when run with use_sim_time:=true
         self.create_timer(1.0 / self.physics_rate_hz, self.on_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_ground_truth()
@@ -108,18 +115,34 @@ class SimNode(Node):
         try:
             times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points]
             positions = [list(p.positions) for p in msg.points]
-            targets = self.session.follow(msg.joint_names, times, positions)
+            targets = self.session.follow(msg.joint_names, times, positions, self.trajectory_start_s(msg))
             self.trajectories_followed += 1
             self.get_logger().info(f"executing trajectory: {len(msg.points)} points, {targets} servo targets")
         except ValueError as error:
             self.trajectories_rejected += 1
             self.errors.error("bad_trajectory", f"rejected trajectory: {error}")
 
+    def trajectory_start_s(self, msg: JointTrajectory) -> float | None:
+        """The trajectory's time zero on the sim clock (s): its header stamp, or None (start now) for a
+        zero stamp or one more than STAMP_TOLERANCE_S off the sim clock (a sender not on /clock)."""
+        start_s = 1e-9 * time_ns(msg.header.stamp)
+        if start_s == 0.0:
+            return None
+        if abs(start_s - self.session.time_s) > STAMP_TOLERANCE_S:
+            self.errors.error(
+                "trajectory_stamp",
+                f"trajectory stamped {start_s:.3f} s, {start_s - self.session.time_s:+.3f} s from the sim clock "
+                "(is the sender on /clock, use_sim_time:=true?); started now",
+            )
+            return None
+        return start_s
+
     def on_tick(self) -> None:
         self.session.step(1.0 / self.physics_rate_hz)
         self.pub_clock.publish(ClockMsg(clock=self.stamp()))
         self.publish_joint_state()
-        if self.session.time_s + 1e-9 >= self._next_render_s:
+        paused = self.goals is not None and self.goals.seconds_left() > 0
+        if self.session.time_s + 1e-9 >= self._next_render_s and not paused:
             self._next_render_s = self.session.time_s + 1.0 / self.camera_rate_hz
             self.publish_frame()
 
@@ -154,6 +177,7 @@ class SimNode(Node):
                     "sim_time_s": self.session.time_s,
                     "trajectories_followed": self.trajectories_followed,
                     "trajectories_rejected": self.trajectories_rejected,
+                    "goal_pauses": self.goals.pauses if self.goals is not None else 0,
                 },
             )
         )
