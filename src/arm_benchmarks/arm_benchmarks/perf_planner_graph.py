@@ -159,8 +159,11 @@ def run_seed(
 ) -> dict:
     sim_time = {"use_sim_time": True}
     processes = {
+        # the sim keeps rendering during goals (its default pauses): the load stays that of earlier runs
         "sim": NodeProcess(
-            "sim", log_dir / "sim.log", ros_args=("-p", f"seed:={seed}", "-p", f"n_objects:={n_objects}")
+            "sim",
+            log_dir / "sim.log",
+            ros_args=("-p", f"seed:={seed}", "-p", f"n_objects:={n_objects}", "-p", "pause_during_goals:=false"),
         )
     }
     processes["segmentation"] = NodeProcess(
