@@ -410,14 +410,17 @@ class PlanNode(Node):
         outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
         if not outcome.planned or self.replan_period_s <= 0:
             return outcome, (self._publish(outcome) if outcome.planned else JointTrajectory())
-        start_com, resume, executed = outcome.start_com_world, None, JointTrajectory()
+        start_com, resume = outcome.start_com_world, None
+        executed_times, executed_positions, executed_s = [], [], 0.0  # the chunks one after another
         for _ in range(self.max_replans + 1):
             result = outcome.result
             chunk = int(np.searchsorted(result.times_s, self.replan_period_s, side="right"))
             last = chunk >= len(result.times_s) or goal_handle.is_cancel_requested
-            sent = self._publish(outcome, None if last else chunk)
-            executed.joint_names = sent.joint_names
-            executed.points.extend(sent.points)
+            n = len(result.times_s) if last else chunk
+            self._publish(outcome, n)
+            executed_times.append(executed_s + result.times_s[:n])
+            executed_positions.append(result.joint_positions[:n])
+            executed_s += float(result.times_s[n - 1]) if n else 0.0
             if last:
                 break
             # the executed prefix runs on the controller's (the sim's) clock: wait on the node's clock,
@@ -432,6 +435,11 @@ class PlanNode(Node):
                 self.errors.error("replan", f"re-planning failed, keeping the executed prefix: {replanned.message}")
                 break
             outcome = replanned
+        if not executed_times:
+            return outcome, JointTrajectory()
+        executed = trajectory_msg(
+            outcome.result.joint_names, np.concatenate(executed_times), np.concatenate(executed_positions)
+        )
         return outcome, executed
 
     # --- diagnostics -------------------------------------------------------------------------

@@ -125,6 +125,9 @@ def test_closed_loop_replanning_executes_in_chunks(graph):
     chunks = received[before:]
     assert [len(c.points) for c in chunks[:2]] == [2, 2]
     assert len(result.trajectory.points) == sum(len(c.points) for c in chunks)
+    # the result is the executed chunks one after another: one trajectory, its times increasing
+    times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in result.trajectory.points]
+    assert np.all(np.diff(times) > 0)
 
 
 def _plan_index(positions, part):
