@@ -36,7 +36,13 @@ def sim_trajectory_cases() -> list[tuple[str, str, JointTrajectory]]:
         ("time_from_start decreasing", "reject", _trajectory(names, [(2.0, home), (1.0, home)])),
         ("one hour long", "reject", _trajectory(names, [(3600.0, home)])),
         ("positions far outside the limits", "valid", _trajectory(names, [(0.5, [100.0] * 7)])),
+        ("stamped a day off the sim clock (started on arrival)", "valid", _stamped(_trajectory(names, [(0.5, home)]))),
     ]
+
+
+def _stamped(msg: JointTrajectory, sec: int = 86_400) -> JointTrajectory:
+    msg.header.stamp.sec = sec
+    return msg
 
 
 def run_sim_bad_inputs(probe, process, settle_s: float = 2.0) -> dict:
