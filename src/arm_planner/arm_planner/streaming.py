@@ -4,9 +4,11 @@ The planner emits one control (joint targets) per control step. TrajectoryStream
 says when to send the controller a part: first once `lead_s` of motion is planned, then whenever
 `period_s` more is. The controller replaces its trajectory with every message and interpolates from
 its current command to the first point (ROS JointTrajectory semantics), so each part holds every
-planned point not executed yet, times counted from the moment it is sent. The stream books how far
-the controller got: the time since the previous part, capped at that part's end (after its end the
-controller holds the last point until the next part comes, then continues from there). Pure: no rclpy.
+planned point not executed yet, times counted from the moment it is sent (its header stamp: a
+controller that keeps to the stamp continues the plan when a part arrives late). The stream books
+how far the controller got: the time since the previous part, capped at that part's end (after its
+end the controller holds the last point until the next part comes, then continues from there).
+Pure: no rclpy.
 """
 
 from __future__ import annotations
