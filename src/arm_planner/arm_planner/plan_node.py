@@ -332,6 +332,7 @@ class PlanNode(Node):
             result = outcome.result
             motion_s = float(result.times_s[-1]) if len(result.times_s) else float("nan")
             self.plan_figures = {
+                "last_plan_twin_objects": outcome.twin_objects,  # twin_objects: the latest /arm/meshes
                 "last_plan_s": plan_s,
                 "last_motion_s": motion_s,
                 "realtime_factor": plan_s / motion_s,

@@ -163,6 +163,15 @@ def test_streamed_parts_join_into_the_plan(graph):
     assert starts[-1] + len(parts[-1].points) == len(positions)
     assert node.plan_figures["stream_parts"] == len(parts)
     assert node.plan_figures["realtime_factor"] > 0
+    assert node.plan_figures["last_plan_twin_objects"] >= 1
+    # one time base: a planned point sent in two parts is due at the same clock time in both
+    due = {}
+    for start, part in zip(starts, parts, strict=True):
+        stamp_s = part.header.stamp.sec + 1e-9 * part.header.stamp.nanosec
+        assert stamp_s > 0
+        for k, point in enumerate(part.points):
+            t = stamp_s + point.time_from_start.sec + 1e-9 * point.time_from_start.nanosec
+            assert due.setdefault(start + k, t) == pytest.approx(t, abs=1e-5)
 
 
 def test_goal_plans_on_the_meshes_its_stamp_names(graph):
