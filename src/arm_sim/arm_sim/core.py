@@ -11,7 +11,7 @@ from arm_sim.appearance import DEFAULT_DOMAIN
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SERVO_PERIOD_S, SimWorld
+from arm_sim.world import SERVO_PERIOD_S, SimWorld, servo_targets
 
 COMMAND_NAMES = tuple(robot.JOINT_NAMES) + (robot.FINGER_JOINT_NAMES[0],)
 
@@ -69,10 +69,10 @@ class SimSession:
         """Advance dt_s of simulated time; every SERVO_PERIOD_S the servos take the followed trajectory's
         next target (after its end they hold the last one), as SimWorld.execute drives them."""
         model, data = self.world.model, self.world.data
+        lo, hi = model.actuator_ctrlrange[:8].T
         end_s = self.time_s + dt_s
         while self.time_s < end_s - 1e-9:
             if len(self._targets) and self.time_s >= self._next_servo_s - 1e-9:
-                lo, hi = model.actuator_ctrlrange[:8].T
                 data.ctrl[:8] = np.clip(self._targets[0], lo, hi)
                 self._targets = self._targets[1:]
                 self._next_servo_s += SERVO_PERIOD_S
@@ -115,11 +115,9 @@ def trajectory_targets(
     max_duration_s: float = 120.0,
     started_s_ago: float = 0.0,
 ) -> np.ndarray:
-    """Per-tick servo targets (N, 8) that linearly interpolate a joint trajectory from the current
-    command, the first tick dt_s from now. Joints missing from joint_names keep their current target.
-    started_s_ago: how long ago the trajectory's time zero was (its header stamp, ROS semantics): > 0
-    skips what is already past (every point past: the last point), < 0 holds the current command until
-    it starts. Raises ValueError."""
+    """A JointTrajectory's joints and points, validated, as servo targets every dt_s (world.servo_targets;
+    started_s_ago: how long ago its header stamp was). Joints missing from joint_names keep their
+    current target. Raises ValueError."""
     names = list(joint_names)
     unknown = [n for n in names if n not in COMMAND_NAMES]
     if unknown:
@@ -135,12 +133,4 @@ def trajectory_targets(
     columns = [COMMAND_NAMES.index(n) for n in names]
     full = np.tile(current, (len(times_s), 1))
     full[:, columns] = positions
-    ahead = times_s - started_s_ago
-    future = ahead > 1e-9
-    if not future.any():
-        return full[-1:].copy()
-    hold = [-started_s_ago] if started_s_ago < 0 else []
-    knots_t = np.concatenate([[0.0], hold, ahead[future]])
-    knots_q = np.vstack([current] * (1 + len(hold)) + [full[future]])
-    ticks = np.arange(dt_s, knots_t[-1] + 1e-9, dt_s)
-    return np.stack([np.interp(ticks, knots_t, knots_q[:, k]) for k in range(knots_q.shape[1])], axis=1)
+    return servo_targets(times_s, full, current, dt_s, started_s_ago)

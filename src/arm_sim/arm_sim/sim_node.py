@@ -141,8 +141,8 @@ class SimNode(Node):
         self.session.step(1.0 / self.physics_rate_hz)
         self.pub_clock.publish(ClockMsg(clock=self.stamp()))
         self.publish_joint_state()
-        paused = self.goals is not None and self.goals.seconds_left() > 0
-        if self.session.time_s + 1e-9 >= self._next_render_s and not paused:
+        due = self.session.time_s + 1e-9 >= self._next_render_s
+        if due and (self.goals is None or self.goals.seconds_left() == 0):  # no frames during goals
             self._next_render_s = self.session.time_s + 1.0 / self.camera_rate_hz
             self.publish_frame()
 

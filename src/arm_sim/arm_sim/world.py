@@ -176,6 +176,23 @@ def body_pose(data: mujoco.MjData, body_id: int) -> np.ndarray:
     return T
 
 
+def servo_targets(times_s, positions, current: np.ndarray, dt_s: float, started_s_ago: float = 0.0) -> np.ndarray:
+    """Servo targets every dt_s from now, the first dt_s from now, (N, 8): the trajectory (times s from
+    its time zero, positions (n, 8) of 7 joints + finger opening) interpolated linearly from the current
+    command. started_s_ago: how long ago its time zero was (a header stamp): > 0 skips what is already
+    past (all of it past: the last point), < 0 holds the current command until it starts."""
+    ahead = np.asarray(times_s, dtype=np.float64) - started_s_ago
+    positions = np.asarray(positions, dtype=np.float64)
+    future = ahead > 1e-9
+    if not future.any():
+        return positions[-1:].copy()
+    hold = [-started_s_ago] if started_s_ago < 0 else []
+    knots_t = np.concatenate([[0.0], hold, ahead[future]])
+    knots_q = np.vstack([current] * (1 + len(hold)) + [positions[future]])
+    ticks = np.arange(dt_s, knots_t[-1] + 1e-9, dt_s)
+    return np.stack([np.interp(ticks, knots_t, knots_q[:, k]) for k in range(knots_q.shape[1])], axis=1)
+
+
 class SimWorld:
     """A simulated scene: physics, the robot's position control, and RGB-D rendering."""
 
@@ -231,12 +248,7 @@ class SimWorld:
     def execute(self, times_s: np.ndarray, positions: np.ndarray, control_dt_s: float = SERVO_PERIOD_S) -> None:
         """Track a joint trajectory (times from now, positions (N,8): 7 joints + finger opening) with
         the position servos, interpolated every control_dt_s; physics runs in C between updates."""
-        times_s, positions = np.asarray(times_s, float), np.asarray(positions, float)
-        start = np.concatenate([self.data.ctrl[:8]])
-        times_s = np.concatenate([[0.0], times_s])
-        positions = np.vstack([start, positions])
-        ticks = np.arange(control_dt_s, times_s[-1] + 1e-9, control_dt_s)
-        targets = np.stack([np.interp(ticks, times_s, positions[:, k]) for k in range(8)], 1)
+        targets = servo_targets(times_s, positions, self.data.ctrl[:8].copy(), control_dt_s)
         lo, hi = self.model.actuator_ctrlrange[:8].T
         targets = np.clip(targets, lo, hi)
         substeps = max(1, int(round(control_dt_s / self.model.opt.timestep)))

@@ -21,7 +21,6 @@ def test_trajectory_targets_interpolate_and_validate():
             trajectory_targets(names, times, positions, current, 0.1)
 
 
-
 def test_the_sim_session_follows_a_trajectory_as_the_world_executes_it():
     """sim_node's controller (SimSession.follow, then steps of one physics tick) and SimWorld.execute
     (the benchmarks' executor, the twin's control ramp) drive the servos alike: the same state at the end."""
