@@ -337,6 +337,8 @@ class Planner:
             spec.finger_width_m,
             spec.fingertip_to_palm_m,
             spec.tcp_above_fingertip_m,
+            spec.palm_length_m,
+            spec.palm_width_m,
         )
 
     def tcp_jacobian(self, data: mujoco.MjData) -> np.ndarray:
