@@ -127,6 +127,9 @@ class PlannerConfig:
     # (a ring, a torus, a U) or a finger would come down on the target, grasp at the nearest site with
     # its material squarely between them (grasp_site).
     grasp_site_search: bool = True
+    # Grasp and rearrange: coming down, the open fingers keep out of the target (FingerIntrusion;
+    # needs the robot spec's finger sizes): a finger landing on a tall or top-heavy target tips it.
+    keep_fingers_off_target: bool = True
     # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
     # every axis to its goal instead of trying to pick it up.
     push_ungraspable: bool = True
@@ -281,8 +284,9 @@ class Planner:
                 close_steps=self.config.close_steps,
                 carry_height_m=carry,
                 finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
-                fingers=self._open_fingers() if self.config.clear_fingers or search else None,
+                fingers=self._open_fingers() if self._needs_fingers() else None,
                 clear_fingers=self.config.clear_fingers,
+                keep_fingers_off_target=self.config.keep_fingers_off_target,
                 search_grasp_site=search,
             )
             if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push
@@ -328,6 +332,11 @@ class Planner:
                 tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
             )
         return PushReward(**push, contact_height_m=self.config.push_contact_height_m)
+
+    def _needs_fingers(self) -> bool:
+        """Whether a grasp uses the open fingers' (and palm's) sizes."""
+        c = self.config
+        return c.clear_fingers or c.grasp_site_search or c.keep_fingers_off_target
 
     def _open_fingers(self) -> OpenFingers:
         spec = self.robot.spec
