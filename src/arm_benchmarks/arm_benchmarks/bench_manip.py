@@ -308,10 +308,10 @@ def main(argv=None) -> int:
         help="grasp where the target's material lies between the fingers when its centre of mass has none there",
     )
     parser.add_argument(
-        "--keep-fingers-off-target",
+        "--hand-clearance",
         action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.keep_fingers_off_target,
-        help="grasp: coming down, keep the open fingers out of the target",
+        default=PlannerConfig.hand_clearance,
+        help="grasp: coming down, keep the open fingers out of the target and the palm off other objects",
     )
     parser.add_argument(
         "--push-ungraspable",
@@ -385,7 +385,7 @@ def main(argv=None) -> int:
     config.push_cage = args.push_cage
     config.grasp_site_search = args.grasp_site_search
     config.push_ungraspable = args.push_ungraspable
-    config.keep_fingers_off_target = args.keep_fingers_off_target
+    config.hand_clearance = args.hand_clearance
     config.object_friction = args.friction
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
@@ -431,7 +431,7 @@ def main(argv=None) -> int:
             ("push_cage", args.push_cage, PlannerConfig.push_cage),
             ("grasp_site_search", args.grasp_site_search, PlannerConfig.grasp_site_search),
             ("push_ungraspable", args.push_ungraspable, PlannerConfig.push_ungraspable),
-            ("keep_fingers_off_target", args.keep_fingers_off_target, PlannerConfig.keep_fingers_off_target),
+            ("hand_clearance", args.hand_clearance, PlannerConfig.hand_clearance),
             ("only_tasks", run_tasks, args.tasks),
             ("tracker", args.tracker, "perfect"),
         )

@@ -112,11 +112,11 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
     config.clear_fingers = declare(
         node, "clear_fingers", PlannerConfig.clear_fingers, "Grasp: turn the fingers off neighbouring objects"
     )
-    config.keep_fingers_off_target = declare(
+    config.hand_clearance = declare(
         node,
-        "keep_fingers_off_target",
-        PlannerConfig.keep_fingers_off_target,
-        "Grasp: coming down, keep the open fingers out of the target",
+        "hand_clearance",
+        PlannerConfig.hand_clearance,
+        "Grasp: coming down, keep the open fingers out of the target and the palm off other objects",
     )
     config.grasp_site_search = declare(
         node,

@@ -33,7 +33,11 @@ def render_scene(index: int, config: BenchConfig, pool):
     wanted = config.view_candidates if config.view == "occluded" else 1
     best, best_score, found = None, (-1, -1), 0
     with BenchmarkScene(
-        pool, rng, (config.min_objects, config.max_objects), depth_noise=config.depth_noise, scale_range=scale_range,
+        pool,
+        rng,
+        (config.min_objects, config.max_objects),
+        depth_noise=config.depth_noise,
+        scale_range=scale_range,
         domain=config.domain,
     ) as views:
         for _ in range(MAX_VIEW_TRIES * wanted):
