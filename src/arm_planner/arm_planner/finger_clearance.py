@@ -193,26 +193,19 @@ class FingerIntrusion:
     """How much deeper than allowed the open fingers of a hand stand in a target as it stood when
     this was made (m): a finger that comes down on a tall or top-heavy object tips it over.
 
-    The target is its convex parts as half-spaces (world frame), sampled once on a voxel grid; the
-    allowance is how deep the fingers stand at the hand's goal pose (hand_goal_pos, hand_goal_rot)
-    plus allowance_m, so the goal itself costs nothing."""
+    The target is a depth grid of it (DepthGrid); the allowance is how deep the fingers stand at the
+    hand's goal pose (hand_goal_pos, hand_goal_rot) plus allowance_m, so the goal itself costs nothing."""
 
     def __init__(
         self,
         fingers: OpenFingers,
-        part_halfspaces: list[np.ndarray],
-        vertices_world: np.ndarray,
+        target_depth: DepthGrid,
         hand_goal_pos: np.ndarray,
         hand_goal_rot: np.ndarray,
         allowance_m: float = 0.004,
-        voxel_m: float = 0.004,
         finger_spacing_m: float = 0.015,
     ):
-        from arm_planner.grasp_site import Occupancy  # grasp_site builds on this module
-
-        lo, hi = vertices_world.min(axis=0) - voxel_m, vertices_world.max(axis=0) + voxel_m
-        occupancy = Occupancy.from_parts(part_halfspaces, lo, hi, voxel_m)
-        self.grid = DepthGrid.from_filled(occupancy.origin_world, voxel_m, occupancy.filled)
+        self.grid = target_depth
         self.finger_points_hand = finger_points_in_hand(fingers, finger_spacing_m)
         at_goal = deepest_finger_m(np.asarray(hand_goal_pos), hand_goal_rot, self.finger_points_hand, self.grid)
         self.allowed_m = float(at_goal) + allowance_m

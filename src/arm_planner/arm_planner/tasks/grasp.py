@@ -15,8 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_planner.finger_clearance import FingerIntrusion, OpenFingers, clear_closing_axis, hand_pointing_down
-from arm_planner.grasp_site import GraspTarget, find_grasp_site, search_grasp_site
+from arm_planner.finger_clearance import (
+    DepthGrid,
+    FingerIntrusion,
+    OpenFingers,
+    clear_closing_axis,
+    hand_pointing_down,
+)
+from arm_planner.grasp_site import GraspTarget, Occupancy, find_grasp_site, search_grasp_site
 from arm_planner.tasks.base import TaskReward, angle_down, offsets_along, tilt_beyond, yaw_error
 
 GRASP_STATES = ("ungrasped", "grasping", "grasped")
@@ -116,10 +122,12 @@ class GraspReward(TaskReward):
             )
         known = self.fingers is not None and self.fingers.known and g.part_halfspaces and len(g.vertices_world)
         if self.keep_fingers_off_target and known:
+            voxel_m = 0.004
+            lo, hi = g.vertices_world.min(axis=0) - voxel_m, g.vertices_world.max(axis=0) + voxel_m
+            occupancy = Occupancy.from_parts(g.part_halfspaces, lo, hi, voxel_m)
             self._finger_intrusion = FingerIntrusion(
                 self.fingers,
-                g.part_halfspaces,
-                g.vertices_world,
+                DepthGrid.from_filled(occupancy.origin_world, voxel_m, occupancy.filled),
                 self.grasp_point,
                 hand_pointing_down(self.closing_axis),
                 self.finger_depth_allowance_m,
