@@ -105,8 +105,8 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         node,
         "push_cage_margin_m",
         PlannerConfig.push_cage_margin_m,
-        "Push: the cage's clearance to the object each side, m",
-        0.0,
+        "Push: the cage's clearance to the object each side, m (negative: the fingers close onto it)",
+        -0.01,
         0.02,
     )
     config.clear_fingers = declare(

@@ -143,11 +143,11 @@ class PlannerConfig:
     # Push with the open fingers fore and aft of the object (CagePushReward) when it fits between them
     # and the robot's spec gives its finger geometry; otherwise, or when False, with one finger.
     push_cage: bool = True
-    # ... closed to its extent along the push plus this each side, m (CagePushReward.cage_margin_m). With
-    # 3 mm, wine glasses and T-shapes leaned onto the front finger and stalled or toppled; with none the
-    # 99-episode design's push met more (docs/experiments.md), though a lone T in the tests then tips
-    # over late in its push (with 3 mm it arrives standing).
-    push_cage_margin_m: float = 0.0
+    # ... closed to its extent along the push plus this each side, m (CagePushReward.cage_margin_m);
+    # negative: the fingers close that far onto the object, a light pinch. With 3 mm, wine glasses and
+    # T-shapes leaned onto the front finger and stalled or toppled; with none, top-heavy lamps still
+    # leaned onto it and turned out of the cage; -2 mm holds them upright (docs/experiments.md).
+    push_cage_margin_m: float = -0.002
     # Object-table sliding friction the twin assumes: the table the robot works on (the simulator's
     # by default; set it to the real table's).
     object_friction: float = SLIDING_FRICTION

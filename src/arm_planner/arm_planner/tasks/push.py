@@ -199,9 +199,9 @@ class CagePushReward(PushReward):
     tcp_above_fingertip_m: float = 0.007
     tip_clearance_m: float = 0.010
     palm_clearance_m: float = 0.005
-    # While pushing, the fingers close to the object's extent along the push plus this each side, and
-    # the hand aims this far forward of the cage's middle, so the rear finger presses on the object.
-    # The planner sets it from PlannerConfig.push_cage_margin_m (why none: docs/experiments.md).
+    # While pushing, the fingers close to the object's extent along the push plus this each side
+    # (negative: onto it), and the hand aims this far forward of the cage's middle, so the rear finger
+    # presses on the object. The planner sets it from PlannerConfig.push_cage_margin_m.
     cage_margin_m: float = 0.0
     press_m: float = 0.01
     # Per radian between the finger closing axis and the push direction.
