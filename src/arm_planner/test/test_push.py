@@ -161,13 +161,15 @@ def test_cage_pushes_an_object_that_slid_past_the_goal_back_with_the_front_finge
     assert scores[1] > scores[0], "past the goal, the hand leads back towards it"
 
 
-def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_push():
+@pytest.mark.parametrize("margin_m", [0.003, 0.0, -0.002])
+def test_cage_fingers_open_to_approach_and_close_to_the_object_plus_margins_to_push(margin_m):
     reward = _cage_on((0.04, 0.03, 0.064))
+    reward.cage_margin_m = margin_m
     assert reward.gripper_command(0.04, 0.0) == 0.04
     reward.resume("pushing", 0)
     command = reward.gripper_command(0.04, 0.0)
     gap = reward.cage_gap_m - 2 * (0.04 - command)
-    assert gap == pytest.approx(0.04 + 2 * reward.cage_margin_m)
+    assert gap == pytest.approx(0.04 + 2 * margin_m), "a negative margin closes the fingers onto the object"
 
 
 def test_cage_goes_back_over_the_top_when_the_object_is_behind_the_rear_finger():
