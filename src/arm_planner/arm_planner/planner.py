@@ -152,6 +152,11 @@ class PlannerConfig:
     # by default; set it to the real table's).
     object_friction: float = SLIDING_FRICTION
 
+    @property
+    def uses_hand_geometry(self) -> bool:
+        """Whether grasps use the open fingers' (and palm's) sizes and the objects' convex parts."""
+        return self.clear_fingers or self.grasp_site_search or self.hand_clearance
+
 
 @dataclass
 class PlanResult:
@@ -288,7 +293,7 @@ class Planner:
                 close_steps=self.config.close_steps,
                 carry_height_m=carry,
                 finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
-                fingers=self._open_fingers() if self._needs_fingers() else None,
+                fingers=self._open_fingers() if self.config.uses_hand_geometry else None,
                 clear_fingers=self.config.clear_fingers,
                 keep_fingers_off_target=self.config.hand_clearance,
                 search_grasp_site=search,
@@ -336,11 +341,6 @@ class Planner:
                 tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
             )
         return PushReward(**push, contact_height_m=self.config.push_contact_height_m)
-
-    def _needs_fingers(self) -> bool:
-        """Whether a grasp uses the open fingers' (and palm's) sizes."""
-        c = self.config
-        return c.clear_fingers or c.grasp_site_search or c.hand_clearance
 
     def _open_fingers(self) -> OpenFingers:
         spec = self.robot.spec

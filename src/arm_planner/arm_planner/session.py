@@ -180,8 +180,7 @@ class ManipulationSession:
             reason = twin.skipped.get(target_id, "not in the twin")
             return Outcome(False, f"target {target_id} cannot be simulated: {reason}", skipped=dict(twin.skipped))
         poses = {o.id: o.T_world_object for o in self.objects}
-        with_halfspaces = self.config.clear_fingers or self.config.grasp_site_search or self.config.hand_clearance
-        geometry = twin.target_geometry(target_id, poses, with_halfspaces=with_halfspaces)
+        geometry = twin.target_geometry(target_id, poses, with_halfspaces=self.config.uses_hand_geometry)
         start = geometry.com_world if start_com_world is None else np.asarray(start_com_world, dtype=np.float64)
         goal = start + (np.array([0.0, 0.0, self.config.grasp_lift_goal_m]) if task == TASK_GRASP else displacement)
         for what, point in (("target", geometry.com_world), ("goal", goal)):
