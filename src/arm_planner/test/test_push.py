@@ -187,3 +187,50 @@ def test_cage_goes_back_over_the_top_when_the_object_is_behind_the_rear_finger()
     reward.update(run_ahead)
     assert reward.state == "approaching"
     assert reward.gripper_command(0.04, 0.0) == 0.04, "fingers open to come down over it again"
+
+
+def _one_finger_on(extents, hand=None) -> PushReward:
+    x, y, z = extents
+    box = np.array([[i, j, k] for i in (-x / 2, x / 2) for j in (-y / 2, y / 2) for k in (0.0, z)])
+    geometry = TargetGeometry(np.array([0.0, 0.0, z / 2]), box, 0.0)
+    return PushReward(
+        hand=hand or poses_from(0), target=poses_from(3), geometry=geometry, qpos_offset=0, nq=7,
+        goal_displacement=np.array([0.3, 0.0, 0.0]),
+    )  # fmt: skip
+
+
+def test_one_finger_approach_comes_down_behind_a_tall_object_not_beside_or_over_it():
+    reward = _one_finger_on((0.04, 0.04, 0.16))
+    centre = reward.geometry.com_world[None]
+    reward.target_rot = np.eye(3)[None]
+    contact = reward._contact_point(centre, reward.target_rot)
+    top = 0.16 + reward.over_top_m
+
+    def below_floor(hand):
+        return float(reward.over_object_penalty(np.array([hand]), centre, contact)[0])
+
+    assert below_floor([0.0, 0.05, 0.05]) == pytest.approx(top - 0.05), "beside it, below its top"
+    assert below_floor([0.0, 0.0, 0.15]) == pytest.approx(top - 0.15), "over it, fingers into its top"
+    assert below_floor(contact[0]) == 0.0, "at the contact point"
+    assert below_floor([-0.07, 0.01, 0.05]) == 0.0, "in the lane behind the contact point"
+    assert below_floor([0.0, 0.05, top]) == 0.0, "above the top"
+    assert below_floor([0.0, 0.2, 0.05]) == 0.0, "well away from it"
+    reward.near_object_m = 0.0
+    assert below_floor([0.0, 0.05, 0.05]) == 0.0, "off"
+
+
+def test_one_finger_push_turns_the_palm_narrow_side_to_the_object():
+    """The palm is long along the finger closing axis: across the push, its narrow side faces the object."""
+
+    def hand(qpos):
+        turned = qpos[..., 6] > 0.5  # closing axis along the push instead of across it
+        down = np.diag([1.0, -1.0, -1.0])
+        quarter = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+        return qpos[..., :3], np.where(turned[..., None, None], quarter, down)
+
+    reward = _one_finger_on((0.04, 0.04, 0.16), hand)
+    com = reward.geometry.com_world
+    at = reward._contact_point(com[None], np.eye(3)[None])[0]
+    states = np.array([[*at, *com, 0.0], [*at, *com, 1.0]])
+    scores = reward(states, np.zeros((2, 0)))
+    assert scores[0] - scores[1] == pytest.approx(reward.palm_yaw * np.pi / 2, abs=1e-4)

@@ -179,3 +179,20 @@ def test_a_box_wider_than_the_open_fingers_is_rearranged_by_pushing_it():
     assert len(run.outcome.result.times_s) > budgets["rearrange"]
     session.close()
     world.close()
+
+
+def test_a_tall_cylinder_is_pushed_by_one_finger_and_arrives_standing():
+    """16 cm tall, 6 cm across: too tall for the cage. Coming from the robot's side to the contact point
+    behind it, the hand once swept its fingers and palm through the cylinder's top and toppled it; now
+    it passes above the top, comes down behind it and pushes with the palm's narrow side to it."""
+    scene = _external(trimesh.creation.cylinder(radius=0.03, height=0.16), "tall_cylinder")
+    session = ManipulationSession(PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0)), 0.01)
+    world = SimWorld(scene, robot_arm=True)
+    run = run_in_world(session, world, ground_truth_objects(scene), 0.0, 0, "push", (0.05, -0.3, 0.0), 0.025, 5)
+    reward = session.planner._last_reward
+    assert isinstance(reward, PushReward) and not isinstance(reward, CagePushReward)
+    assert run.success, (run.error_m, run.outcome.message)
+    up = world.data.xmat[world.object_ids[0]].reshape(3, 3)[2, 2]
+    assert np.degrees(np.arccos(up)) < 20.0, "standing"
+    session.close()
+    world.close()

@@ -28,6 +28,22 @@ class PushReward(TaskReward):
     tilt_rad: float = 0.4
     contact_height_m: float = 0.018
     clearance_m: float = 0.012
+    # While approaching, the hand (TCP) stays over_top_m above the object's top wherever its fingers
+    # would meet the object (within finger_margin_m of its footprint) and, within near_object_m of the
+    # footprint, outside the lane behind the contact point (at most lane_half_width_m + its distance
+    # behind to the side of the push line): it comes down behind the object and slides in, rather
+    # than sweeping its fingers or palm through a tall object on the way. near_object_m 0: off.
+    over_top_m: float = 0.02
+    finger_margin_m: float = 0.012
+    near_object_m: float = 0.1
+    lane_half_width_m: float = 0.02
+    # Per radian between the finger closing axis and the horizontal across the push: the palm, long
+    # along the closing axis, then faces a tall object with its narrow side.
+    palm_yaw: float = 0.2
+    # While pushing, the hand rising more than this above the contact height costs as a scrape does:
+    # the higher the finger presses, the sooner a tall object tips (when friction x height exceeds its
+    # base's reach ahead of the centre of mass).
+    rise_allowed_m: float = 0.01
     push_goal_weight: float = 10.0
     upright: float = 1.0
     engage_distance_m: float = 0.02
@@ -110,11 +126,13 @@ class PushReward(TaskReward):
         z = np.broadcast_to(self.push_z + (target_pos[..., 2] - self.geometry.com_world[2]), xy.shape[:-1])
         return np.concatenate([xy, z[..., None]], axis=-1)
 
-    def _support_batch(self, directions_xy: np.ndarray, target_rot: np.ndarray) -> np.ndarray:
-        """How far the rotated object reaches from its centre along each horizontal unit direction (m)."""
+    def _support_batch(self, directions_xy: np.ndarray, target_rot: np.ndarray, lean: bool = True) -> np.ndarray:
+        """How far the rotated object reaches from its centre along each horizontal unit direction (m),
+        as the leaning finger meets it (lean) or at any height."""
         directions = np.concatenate([directions_xy, np.zeros(directions_xy.shape[:-1] + (1,))], axis=-1)
         in_target = np.einsum("...ji,...j->...i", target_rot, directions)
-        return np.max(in_target @ self._vertices_in_target.T - self._lean_setback, axis=-1)
+        reach = in_target @ self._vertices_in_target.T
+        return np.max(reach - self._lean_setback if lean else reach, axis=-1)
 
     def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""
@@ -138,18 +156,40 @@ class PushReward(TaskReward):
         gap = np.where(settled, self.retreat_gap_m, self.push_gap_m if pushing else self.contact_gap_m)
         contact = self._contact_point(target_pos, self.target_rot, gap)
         axis = self._approach_axis(target_pos)
+        direction = self._direction(target_pos)
+        across = np.stack([-direction[..., 1], direction[..., 0]], axis=-1)
 
         def score(pos, rot):
             lean = np.arccos(np.clip(np.einsum("...i,...i->...", rot[..., :, 2], axis), -1.0, 1.0))
             value = -w.distance * np.linalg.norm(pos - contact, axis=-1) - w.angle * lean
+            value = value - self.palm_yaw * yaw_error(rot, across)
             scrape = np.maximum(self.geometry.table_height_m + self.clearance_m - pos[..., 2], 0.0)
             value = value - w.height * scrape
-            return value if pushing else value - w.height * self.funnel_penalty(pos, contact)
+            if pushing:
+                return value - w.height * np.maximum(pos[..., 2] - contact[..., 2] - self.rise_allowed_m, 0.0)
+            return value - w.height * (self.funnel_penalty(pos, contact) + self.over_object_penalty(pos, target_pos, contact))
 
         reward = self.blend(hands, score)
         if pushing:
             reward = self._with_pushing_terms(reward, to_go, speed)
         return reward
+
+    def over_object_penalty(self, hand_pos: np.ndarray, target_pos: np.ndarray, contact: np.ndarray) -> np.ndarray:
+        """How far (m) the hand is below over_top_m above the object's top where it would meet the
+        object on its way to the contact point (see over_top_m)."""
+        if self.near_object_m <= 0:
+            return np.zeros(hand_pos.shape[:-1])
+        offset = hand_pos[..., :2] - target_pos[..., :2]
+        distance = np.linalg.norm(offset, axis=-1)
+        reach = self._support_batch(offset / (distance[..., None] + 1e-9), self.target_rot, lean=False)
+        direction = self._direction(target_pos)
+        from_contact = hand_pos[..., :2] - contact[..., :2]
+        behind = -np.sum(from_contact * direction, axis=-1)
+        aside = np.abs(from_contact[..., 0] * direction[..., 1] - from_contact[..., 1] * direction[..., 0])
+        in_lane = (behind >= -0.005) & (aside <= self.lane_half_width_m + np.maximum(behind, 0.0))
+        over = (distance < reach + self.finger_margin_m) | ((distance < reach + self.near_object_m) & ~in_lane)
+        top = self.geometry.top_z + (target_pos[..., 2] - self.geometry.com_world[2]) + self.over_top_m
+        return np.where(over, np.maximum(top - hand_pos[..., 2], 0.0), 0.0)
 
     def _with_pushing_terms(self, reward: np.ndarray, to_go: np.ndarray, speed: np.ndarray, free_tilt_rad=0.0):
         """reward less, while pushing: the rest point's distance to the goal, object speed the hand could
