@@ -167,7 +167,8 @@ class PushReward(TaskReward):
             value = value - w.height * scrape
             if pushing:
                 return value - w.height * np.maximum(pos[..., 2] - contact[..., 2] - self.rise_allowed_m, 0.0)
-            return value - w.height * (self.funnel_penalty(pos, contact) + self.over_object_penalty(pos, target_pos, contact))
+            below = self.funnel_penalty(pos, contact) + self.over_object_penalty(pos, target_pos, contact)
+            return value - w.height * below
 
         reward = self.blend(hands, score)
         if pushing:
