@@ -23,6 +23,7 @@ from arm_planner.mppi import STATE_SPEC
 from arm_planner.robot_spec import RobotSpec
 from arm_planner.tasks.base import TargetGeometry
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
+from arm_reconstruction.metrics import sample_surface_points
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
@@ -32,6 +33,9 @@ MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
 MAX_DECOMPOSITION_PARTS = 8
 MAX_GEOMETRY_VERTICES = 400
+# Points sampled over a target's convex parts, so that what lies along a line through it is known
+# between its vertices (a box's faces carry none).
+TARGET_SURFACE_SAMPLES = 800
 # Objects overlapping deeper than this as built (m) do not collide with each other in the twin.
 OVERLAP_EXCLUDE_M = 0.002
 
@@ -216,6 +220,7 @@ class Twin:
         self.signature = geometry_signature(objects, table_height_m)
         self._data = mujoco.MjData(self.model)
         self._part_halfspaces: list[list[np.ndarray]] | None = None
+        self._surface_points: dict[int, np.ndarray] = {}  # object index -> points, object frame
 
     def __contains__(self, object_id: int) -> bool:
         return object_id in self.body_names
@@ -229,6 +234,16 @@ class Twin:
         if len(vertices) > MAX_GEOMETRY_VERTICES:
             vertices = vertices[np.linspace(0, len(vertices) - 1, MAX_GEOMETRY_VERTICES).astype(int)]
         return vertices @ T_world_object[:3, :3].T + T_world_object[:3, 3]
+
+    def _surface_points_world(self, i: int, T_world_object: np.ndarray) -> np.ndarray:
+        """TARGET_SURFACE_SAMPLES points over object i's convex parts (by area) at T_world_object."""
+        if i not in self._surface_points:
+            parts = trimesh.util.concatenate(list(self.scene.objects[i].model.convex_parts))
+            try:
+                self._surface_points[i] = sample_surface_points(parts, TARGET_SURFACE_SAMPLES, seed=i)
+            except ValueError:  # parts without area: the vertices stand for the surface
+                self._surface_points[i] = np.zeros((0, 3))
+        return self._surface_points[i] @ T_world_object[:3, :3].T + T_world_object[:3, 3]
 
     def _halfspaces_world(self, i: int, T_world_object: np.ndarray) -> list[np.ndarray]:
         """Object i's convex parts as half-spaces (finger_clearance.halfspaces) at T_world_object."""
@@ -261,6 +276,7 @@ class Twin:
             com_world = T[:3, :3] @ self.model.body(self.body_names[object_id]).ipos + T[:3, 3]
             geometry = TargetGeometry(com_world, vertices_world, self.table_height_m, T[:3, :3].copy())
             geometry.part_halfspaces = self._halfspaces_world(i, T)
+            geometry.surface_points_world = self._surface_points_world(i, T)
         if geometry is None:
             raise KeyError(f"object {object_id} is not in the twin")
         if obstacles:

@@ -1,9 +1,11 @@
 import numpy as np
 import pytest
+import trimesh
 from task_kinematics import poses_from
 
 from arm_planner.tasks.base import RewardWeights, TargetGeometry
 from arm_planner.tasks.push import CagePushReward, PushReward
+from arm_reconstruction.metrics import sample_surface_points
 
 GOAL = np.array([0.05, -0.30, 0.0])
 
@@ -204,10 +206,11 @@ def test_one_finger_approach_comes_down_behind_a_tall_object_not_beside_or_over_
     centre = reward.geometry.com_world[None]
     reward.target_rot = np.eye(3)[None]
     contact = reward._contact_point(centre, reward.target_rot)
+    direction = reward._direction(centre)
     top = 0.16 + reward.over_top_m
 
     def below_floor(hand):
-        return float(reward.over_object_penalty(np.array([hand]), centre, contact)[0])
+        return float(reward.over_object_penalty(np.array([hand]), centre, contact, direction)[0])
 
     assert below_floor([0.0, 0.05, 0.05]) == pytest.approx(top - 0.05), "beside it, below its top"
     assert below_floor([0.0, 0.0, 0.15]) == pytest.approx(top - 0.15), "over it, fingers into its top"
@@ -234,3 +237,36 @@ def test_one_finger_push_turns_the_palm_narrow_side_to_the_object():
     states = np.array([[*at, *com, 0.0], [*at, *com, 1.0]])
     scores = reward(states, np.zeros((2, 0)))
     assert scores[0] - scores[1] == pytest.approx(reward.palm_yaw * np.pi / 2, abs=1e-4)
+
+
+def _u_open_towards_the_finger() -> TargetGeometry:
+    """A U 8 cm wide lying open towards -x (arms at |y| 2.5-4 cm reaching to x = -4 cm, its base at
+    x 2-4 cm), 4 cm tall, with points over its surface."""
+    at = trimesh.transformations.translation_matrix
+    base = trimesh.creation.box(extents=(0.02, 0.08, 0.04), transform=at([0.03, 0, 0.02]))
+    arms = [
+        trimesh.creation.box(extents=(0.06, 0.015, 0.04), transform=at([-0.01, y, 0.02])) for y in (-0.0325, 0.0325)
+    ]
+    parts = trimesh.util.concatenate([base, *arms])
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.02]), np.asarray(parts.vertices), 0.0)
+    geometry.surface_points_world = sample_surface_points(parts, 3000, seed=0)
+    return geometry
+
+
+def test_one_finger_meets_a_u_open_towards_it_at_its_base_not_between_its_arms():
+    geometry = _u_open_towards_the_finger()
+    reward = PushReward(
+        hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0, goal_displacement=np.array([0.3, 0.0, 0.0])
+    )
+    centre = geometry.com_world[None]
+    reward.target_rot = np.eye(3)[None]
+    contact = reward._contact_point(centre, reward.target_rot, gap_m=0.0)[0]
+    assert contact[0] == pytest.approx(0.02, abs=0.003), "the base's inner face, not the arms' ends at -0.04"
+    assert contact[1] == pytest.approx(0.0)
+    approach = reward._contact_point(centre, reward.target_rot)
+    low_there = np.array([[*approach[0, :2], 0.03]])
+    assert reward.over_object_penalty(low_there, centre, approach, reward._direction(centre))[0] == 0.0, (
+        "between the arms, at the contact point, the hand is not over the object"
+    )
+    over_an_arm = np.array([[-0.02, 0.0325, 0.03]])
+    assert reward.over_object_penalty(over_an_arm, centre, approach, reward._direction(centre))[0] > 0.0

@@ -196,3 +196,24 @@ def test_a_tall_cylinder_is_pushed_by_one_finger_and_arrives_standing():
     assert np.degrees(np.arccos(up)) < 20.0, "standing"
     session.close()
     world.close()
+
+
+def test_a_u_open_towards_the_finger_is_pushed_by_its_base():
+    """A U 12 cm wide, its 8 cm arms towards the hand: the contact point once lay behind the arms' ends,
+    on the push line where the U has no material, and the finger stood there in the air; it now meets
+    the base between the arms."""
+    at = trimesh.transformations.translation_matrix
+    arms = [trimesh.creation.box((0.02, 0.08, 0.04), transform=at((x, 0.04, 0.02))) for x in (-0.05, 0.05)]
+    base = trimesh.creation.box((0.12, 0.02, 0.04), transform=at((0.0, 0.01, 0.02)))
+    u_shape = trimesh.boolean.union([base, *arms], engine="manifold")
+    u_shape.apply_translation([0.0, -u_shape.bounds[:, 1].mean(), 0.0])
+    scene = _external(u_shape, "u_shape")
+    session = ManipulationSession(PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=0)), 0.01)
+    world = SimWorld(scene, robot_arm=True)
+    goal = (0.05, -0.3, 0.0)
+    run = run_in_world(session, world, ground_truth_objects(scene), 0.0, 0, "push", goal, 0.025, 5)
+    reward = session.planner._last_reward
+    assert isinstance(reward, PushReward) and not isinstance(reward, CagePushReward)
+    assert run.success, (run.error_m, run.outcome.message)
+    session.close()
+    world.close()

@@ -24,10 +24,16 @@ class TargetGeometry:
     obstacle_halfspaces: list = field(default_factory=list)
     # The target's own convex parts, the same way (empty: unknown).
     part_halfspaces: list = field(default_factory=list)
+    # Points spread over the target's surface, world frame (metres); empty: its vertices stand for it.
+    surface_points_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def vertices_in_target(self) -> np.ndarray:
         """Vertices relative to the centre of mass, in the target body's frame (metres)."""
         return (self.vertices_world - self.com_world) @ np.asarray(self.R_world_target, dtype=np.float64)
+
+    def surface_points(self) -> np.ndarray:
+        """The vertices and the surface points, world frame (metres)."""
+        return np.concatenate([self.vertices_world, np.asarray(self.surface_points_world).reshape(-1, 3)])
 
     @property
     def top_z(self) -> float:

@@ -11,6 +11,8 @@ import numpy as np
 from arm_planner.tasks.base import TargetGeometry, TaskReward, angle_down, offsets_along, yaw_error
 
 PUSH_STATES = ("approaching", "pushing")
+# Grid (m) the object's footprint is kept on, for the hand's distance to it.
+FOOTPRINT_CELL_M = 0.003
 
 
 @dataclass
@@ -37,6 +39,11 @@ class PushReward(TaskReward):
     finger_margin_m: float = 0.012
     near_object_m: float = 0.1
     lane_half_width_m: float = 0.02
+    # The lane starts this far ahead of the contact point (towards the object), m.
+    lane_lead_m: float = 0.005
+    # Half the finger's width (m): the finger coming in along the line through the object's centre
+    # meets the surface within this of that line (the contact point).
+    finger_half_width_m: float = 0.01
     # Per radian between the finger closing axis and the horizontal across the push: the palm, long
     # along the closing axis, then faces a tall object with its narrow side.
     palm_yaw: float = 0.2
@@ -72,14 +79,17 @@ class PushReward(TaskReward):
         self.goal = g.com_world + self.goal_displacement
         height = g.top_z - g.bottom_z
         self.push_z = g.bottom_z + float(min(self.contact_height_m, 0.5 * height))
-        self._vertices_in_target = g.vertices_in_target()
+        points_world = g.surface_points()
+        self._points_in_target = (points_world - g.com_world) @ np.asarray(g.R_world_target, dtype=np.float64)
         # The finger leans into the push, so a part of the object at height z above the contact
         # height meets the finger tan(tilt) (z - contact height) later than one at the contact height:
         # the contact point is the first point of the object that the leaning finger meets, not the
         # object's widest part (an overhanging top would put the fingertip in the air beside a thin
         # base and the finger against the top, which tips the object over).
-        above = np.maximum(g.vertices_world[:, 2] - self.push_z, 0.0)
+        above = np.maximum(points_world[:, 2] - self.push_z, 0.0)
         self._lean_setback = above * np.tan(self.tilt_rad)
+        cells = np.unique(np.round((points_world[:, :2] - g.com_world[:2]) / FOOTPRINT_CELL_M), axis=0)
+        self._footprint_xy = cells * FOOTPRINT_CELL_M
 
     @property
     def gripper_closed(self) -> bool:
@@ -127,12 +137,33 @@ class PushReward(TaskReward):
         return np.concatenate([xy, z[..., None]], axis=-1)
 
     def _support_batch(self, directions_xy: np.ndarray, target_rot: np.ndarray, lean: bool = True) -> np.ndarray:
-        """How far the rotated object reaches from its centre along each horizontal unit direction (m),
-        as the leaning finger meets it (lean) or at any height."""
-        directions = np.concatenate([directions_xy, np.zeros(directions_xy.shape[:-1] + (1,))], axis=-1)
-        in_target = np.einsum("...ji,...j->...i", target_rot, directions)
-        reach = in_target @ self._vertices_in_target.T
-        return np.max(reach - self._lean_setback if lean else reach, axis=-1)
+        """How far the rotated object reaches from its centre along each horizontal unit direction (m):
+        with lean, where the leaning finger coming in along the line through the centre meets it (its
+        surface within finger_half_width_m of that line, all of it when none lies there: a U open
+        towards the finger is met at its base, not in the air between its arms); else anywhere."""
+        zeros = np.zeros(directions_xy.shape[:-1] + (1,))
+        directions = np.concatenate([directions_xy, zeros], axis=-1)
+        reach = np.einsum("...ji,...j->...i", target_rot, directions) @ self._points_in_target.T
+        if not lean:
+            return reach.max(axis=-1)
+        across = np.concatenate([-directions_xy[..., 1:], directions_xy[..., :1], zeros], axis=-1)
+        aside = np.einsum("...ji,...j->...i", target_rot, across) @ self._points_in_target.T
+        reach -= self._lean_setback
+        off_line = np.abs(aside) > self.finger_half_width_m
+        nearest_on_line = np.where(off_line, -np.inf, reach).max(axis=-1)
+        return np.where(np.isfinite(nearest_on_line), nearest_on_line, reach.max(axis=-1))
+
+    def _footprint_distance(self, hand_xy: np.ndarray, target_pos: np.ndarray, target_rot: np.ndarray) -> np.ndarray:
+        """Horizontal distance (m) from each hand position to the object's footprint (its surface points
+        seen from above at planning start, on a FOOTPRINT_CELL_M grid), turned by the object's yaw since."""
+        turned = target_rot @ np.asarray(self.geometry.R_world_target, dtype=np.float64).T
+        yaw_cos, yaw_sin = turned[..., 0, 0], turned[..., 1, 0]
+        scale = np.hypot(yaw_cos, yaw_sin) + 1e-12
+        x, y = np.moveaxis(hand_xy - target_pos[..., :2], -1, 0)
+        local = np.stack([yaw_cos * x + yaw_sin * y, yaw_cos * y - yaw_sin * x], axis=-1) / scale[..., None]
+        footprint = self._footprint_xy
+        squared = np.sum(footprint**2, axis=-1) - 2.0 * local @ footprint.T
+        return np.sqrt(np.maximum(squared.min(axis=-1) + np.sum(local**2, axis=-1), 0.0))
 
     def rest_xy(self, states: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(where the target would stop sliding on its own (world xy, m), its speed (m/s)) per state."""
@@ -167,7 +198,7 @@ class PushReward(TaskReward):
             value = value - w.height * scrape
             if pushing:
                 return value - w.height * np.maximum(pos[..., 2] - contact[..., 2] - self.rise_allowed_m, 0.0)
-            below = self.funnel_penalty(pos, contact) + self.over_object_penalty(pos, target_pos, contact)
+            below = self.funnel_penalty(pos, contact) + self.over_object_penalty(pos, target_pos, contact, direction)
             return value - w.height * below
 
         reward = self.blend(hands, score)
@@ -175,20 +206,22 @@ class PushReward(TaskReward):
             reward = self._with_pushing_terms(reward, to_go, speed)
         return reward
 
-    def over_object_penalty(self, hand_pos: np.ndarray, target_pos: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    def over_object_penalty(
+        self, hand_pos: np.ndarray, target_pos: np.ndarray, contact: np.ndarray, direction: np.ndarray
+    ) -> np.ndarray:
         """How far (m) the hand is below over_top_m above the object's top where it would meet the
-        object on its way to the contact point (see over_top_m)."""
+        object on its way to the contact point (see over_top_m); direction: the push's, unit xy."""
         if self.near_object_m <= 0:
             return np.zeros(hand_pos.shape[:-1])
         offset = hand_pos[..., :2] - target_pos[..., :2]
         distance = np.linalg.norm(offset, axis=-1)
         reach = self._support_batch(offset / (distance[..., None] + 1e-9), self.target_rot, lean=False)
-        direction = self._direction(target_pos)
         from_contact = hand_pos[..., :2] - contact[..., :2]
         behind = -np.sum(from_contact * direction, axis=-1)
         aside = np.abs(from_contact[..., 0] * direction[..., 1] - from_contact[..., 1] * direction[..., 0])
-        in_lane = (behind >= -0.005) & (aside <= self.lane_half_width_m + np.maximum(behind, 0.0))
-        over = (distance < reach + self.finger_margin_m) | ((distance < reach + self.near_object_m) & ~in_lane)
+        in_lane = (behind >= -self.lane_lead_m) & (aside <= self.lane_half_width_m + np.maximum(behind, 0.0))
+        on_footprint = self._footprint_distance(hand_pos[..., :2], target_pos, self.target_rot) < self.finger_margin_m
+        over = on_footprint | ((distance < reach + self.near_object_m) & ~in_lane)
         top = self.geometry.top_z + (target_pos[..., 2] - self.geometry.com_world[2]) + self.over_top_m
         return np.where(over, np.maximum(top - hand_pos[..., 2], 0.0), 0.0)
 
