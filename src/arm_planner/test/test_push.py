@@ -270,3 +270,18 @@ def test_one_finger_meets_a_u_open_towards_it_at_its_base_not_between_its_arms()
     )
     over_an_arm = np.array([[-0.02, 0.0325, 0.03]])
     assert reward.over_object_penalty(over_an_arm, centre, approach, reward._direction(centre))[0] > 0.0
+
+
+def test_the_footprint_turns_with_the_object():
+    """A 16 x 2 cm box: a hand 5 cm off its long side is 4 cm from it; turned a quarter, 5 cm along it is 0."""
+    bar = trimesh.creation.box(
+        extents=(0.16, 0.02, 0.04), transform=trimesh.transformations.translation_matrix([0, 0, 0.02])
+    )
+    geometry = TargetGeometry(np.array([0.0, 0.0, 0.02]), np.asarray(bar.vertices), 0.0)
+    geometry.surface_points_world = sample_surface_points(bar, 2000, seed=0)
+    reward = PushReward(hand=None, target=None, geometry=geometry, qpos_offset=0, nq=0)
+    hand = np.array([[0.0, 0.05]])
+    centre = geometry.com_world[None]
+    quarter_turn = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    assert reward._footprint_distance(hand, centre, np.eye(3)[None])[0] == pytest.approx(0.04, abs=0.003)
+    assert reward._footprint_distance(hand, centre, quarter_turn)[0] == pytest.approx(0.0, abs=0.003)
