@@ -88,8 +88,11 @@ class PushReward(TaskReward):
         # base and the finger against the top, which tips the object over).
         above = np.maximum(points_world[:, 2] - self.push_z, 0.0)
         self._lean_setback = above * np.tan(self.tilt_rad)
-        cells = np.unique(np.round((points_world[:, :2] - g.com_world[:2]) / FOOTPRINT_CELL_M), axis=0)
-        self._footprint_xy = cells * FOOTPRINT_CELL_M
+        # The footprint, where points over the surface are known (the twin gives them); else None.
+        self._footprint_xy = None
+        if len(g.surface_points_world):
+            cells = np.unique(np.round((points_world[:, :2] - g.com_world[:2]) / FOOTPRINT_CELL_M), axis=0)
+            self._footprint_xy = cells * FOOTPRINT_CELL_M
 
     @property
     def gripper_closed(self) -> bool:
@@ -220,7 +223,11 @@ class PushReward(TaskReward):
         behind = -np.sum(from_contact * direction, axis=-1)
         aside = np.abs(from_contact[..., 0] * direction[..., 1] - from_contact[..., 1] * direction[..., 0])
         in_lane = (behind >= -self.lane_lead_m) & (aside <= self.lane_half_width_m + np.maximum(behind, 0.0))
-        on_footprint = self._footprint_distance(hand_pos[..., :2], target_pos, self.target_rot) < self.finger_margin_m
+        if self._footprint_xy is None:  # vertices only: the reach along the hand's bearing stands for it
+            on_footprint = distance < reach + self.finger_margin_m
+        else:
+            footprint_distance = self._footprint_distance(hand_pos[..., :2], target_pos, self.target_rot)
+            on_footprint = footprint_distance < self.finger_margin_m
         over = on_footprint | ((distance < reach + self.near_object_m) & ~in_lane)
         top = self.geometry.top_z + (target_pos[..., 2] - self.geometry.com_world[2]) + self.over_top_m
         return np.where(over, np.maximum(top - hand_pos[..., 2], 0.0), 0.0)
