@@ -201,6 +201,8 @@ def run_method(
         session.close()
         world.close()
     if not run.outcome.planned:
+        if run.outcome.infeasible:
+            row["infeasible"] = True
         return row | {"success": False, "failure": run.outcome.message, "seconds": time.perf_counter() - started}
     return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
 

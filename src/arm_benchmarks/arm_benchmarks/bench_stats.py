@@ -36,8 +36,16 @@ def counted(rows) -> list[dict]:
     return [r for r in rows if "skipped" not in r and "unavailable" not in r]
 
 
+def infeasible_episodes(rows) -> set:
+    """Episodes the robot cannot do at all, as judged on the true meshes: ground truth's planner refused
+    them (the target or goal out of reach, or the target too wide for the gripper every way)."""
+    return {r["episode"] for r in rows if r["method"] == GROUND_TRUTH and r.get("infeasible")}
+
+
 def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
     summary = {"methods": {}, "episodes": episodes, "confidence": 0.9}
+    infeasible = infeasible_episodes(rows)
+    judged = any(r["method"] == GROUND_TRUTH for r in rows)
     for method in methods:
         mine = [r for r in rows if r["method"] == method]
         unavailable = sorted({r["unavailable"] for r in mine if "unavailable" in r})
@@ -58,8 +66,17 @@ def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
             "predicted_success": _rate([{"success": r.get("predicted_success", False)} for r in mine])["rate"],
             "median_mppi_step_ms": median([r["mppi_step_ms"] for r in mine if "mppi_step_ms" in r]),
         }
+        if judged:
+            feasible = _rate([r for r in mine if r["episode"] not in infeasible])
+            summary["methods"][method] |= {
+                "feasible_success": feasible["rate"],
+                "feasible_success_ci90": feasible["ci90"],
+                "feasible_n": feasible["n"],
+            }
         if unavailable:
             summary["methods"][method]["unavailable"] = unavailable
+    if judged:
+        summary["infeasible_episodes"] = sorted(infeasible)
     summary["targets"] = _targets(summary)
     return summary
 
@@ -71,6 +88,8 @@ def _targets(summary) -> dict:
         return methods.get(m, {}).get("success", float("nan"))
 
     checks = {"ground_truth_success": success(GROUND_TRUTH)}
+    if "feasible_success" in methods.get(GROUND_TRUTH, {}):
+        checks["ground_truth_feasible_success"] = methods[GROUND_TRUTH]["feasible_success"]
     if "arm" in methods and "baseline" in methods and success("baseline") > 0:
         checks["arm_over_baseline"] = success("arm") / success("baseline")
     if "arm" in methods:
@@ -182,6 +201,18 @@ def write_report(summary, out: pathlib.Path) -> None:
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {m['predicted_success']:.2f} |")
         if "unavailable" in m:
             lines.append(f"| {name} unavailable: {'; '.join(m['unavailable'])} |")
+    if "infeasible_episodes" in summary:
+        lines += [
+            "",
+            f"Episodes the robot cannot do at all (ground truth's planner refused them: out of reach, or the "
+            f"target wider than the open gripper every way): {len(summary['infeasible_episodes'])} "
+            f"{summary['infeasible_episodes']}. Success over the others:",
+            "",
+        ]
+        lines += [
+            f"- {name}: {_fmt(m['feasible_success'], m['feasible_success_ci90'], m['feasible_n'])}"
+            for name, m in methods.items()
+        ]
     lines += ["", "## Success by target visibility", ""]
     first = next(iter(methods.values()))
     lines.append("| visible fraction | " + " | ".join(methods) + " |")

@@ -2,7 +2,7 @@ import json
 import math
 
 from arm_benchmarks.bench_manip import GROUND_TRUTH, load_done, plan_episodes, result_key
-from arm_benchmarks.bench_stats import BINS, bin_label, summarise
+from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_report
 
 
 def test_bins_match_the_paper():
@@ -31,6 +31,27 @@ def test_summary_layout_and_excluded_rows():
     assert arm["by_task"] == {"grasp": 1.0, "push": 0.0}
     assert arm["by_visibility"]["1.0"] == 1.0 and math.isnan(arm["by_visibility"]["0.5-0.6"])
     assert summary["methods"]["baseline"]["unavailable"] == ["no checkpoint"]
+
+
+def test_episodes_ground_truth_refuses_as_infeasible_are_left_out_of_the_feasible_rate(tmp_path):
+    rows = [
+        {"episode": 0, "method": GROUND_TRUTH, "task": "grasp", "bin": "1.0", "success": True},
+        {"episode": 0, "method": "arm", "task": "grasp", "bin": "1.0", "success": True},
+        {"episode": 1, "method": GROUND_TRUTH, "task": "grasp", "bin": "1.0", "success": False, "infeasible": True},
+        {"episode": 1, "method": "arm", "task": "grasp", "bin": "1.0", "success": False},
+        {"episode": 2, "method": GROUND_TRUTH, "task": "grasp", "bin": "1.0", "success": False},
+        {"episode": 2, "method": "arm", "task": "grasp", "bin": "1.0", "success": True},
+    ]
+    summary = summarise(rows, [GROUND_TRUTH, "arm"], ["grasp"], BINS, 3)
+    truth, arm = summary["methods"][GROUND_TRUTH], summary["methods"]["arm"]
+    assert summary["infeasible_episodes"] == [1]
+    assert (
+        truth["n"] == 3 and truth["success"] == 1 / 3 and truth["feasible_n"] == 2 and truth["feasible_success"] == 0.5
+    )
+    assert arm["feasible_n"] == 2 and arm["feasible_success"] == 1.0
+    assert summary["targets"]["ground_truth_feasible_success"] == 0.5
+    write_report(summary, tmp_path)
+    assert "cannot do at all" in (tmp_path / "report.md").read_text()
 
 
 def test_results_of_another_run_are_never_reused(tmp_path):

@@ -40,6 +40,10 @@ DEFAULT_TOLERANCE_M = 0.025
 DEFAULT_TASK_STEPS = {"rearrange": 500, "push": 750}
 
 
+class TaskInfeasible(ValueError):
+    """The robot cannot do the task at all (the gripper cannot hold the target), whatever the plan."""
+
+
 @dataclass
 class PlanRequest:
     task: str
@@ -306,6 +310,12 @@ class Planner:
                 pushed = request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable
             if pushed:
                 reward = self._push_reward(common, target_id, displacement, geometry)
+            elif request.task == TASK_GRASP and request.resume_state is None and reward.ungraspable:
+                raise TaskInfeasible(
+                    f"the target is at least {reward.narrowest_width_m * 100:.1f} cm wide along every horizontal "
+                    f"axis, the open fingers hold {reward.fingers.gap_m * 100:.1f} cm, and no site "
+                    "on it fits between them: a parallel gripper cannot pick it up (push or rearrange it instead)"
+                )
         elif request.task == TASK_PUSH:
             reward = self._push_reward(common, target_id, displacement, geometry)
         else:

@@ -22,6 +22,7 @@ from arm_planner.planner import (
     PlanRequest,
     PlanResult,
     Stream,
+    TaskInfeasible,
 )
 from arm_planner.robot_spec import RobotSpec
 from arm_planner.tasks import TASK_GRASP, TASKS
@@ -36,7 +37,8 @@ REACH_M = 0.80
 
 @dataclass
 class Outcome:
-    """What a request produced. planned: a trajectory exists (possibly predicted to fail)."""
+    """What a request produced. planned: a trajectory exists (possibly predicted to fail). infeasible:
+    refused because the robot cannot do the task at all (out of its reach, or too wide for its gripper)."""
 
     success: bool
     message: str
@@ -46,6 +48,7 @@ class Outcome:
     twin_objects: int = 0
     skipped: dict[int, str] = field(default_factory=dict)
     start_com_world: np.ndarray | None = None
+    infeasible: bool = False
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -186,7 +189,7 @@ class ManipulationSession:
         for what, point in (("target", geometry.com_world), ("goal", goal)):
             problem = self._reach_problem(point)
             if problem:
-                return Outcome(False, f"{what} out of reach: {problem}", skipped=dict(twin.skipped))
+                return Outcome(False, f"{what} out of reach: {problem}", skipped=dict(twin.skipped), infeasible=True)
         plan_request = PlanRequest(
             task,
             twin.body_name(target_id),
@@ -207,6 +210,8 @@ class ManipulationSession:
                 observe=observe,
                 stream=stream,
             )
+        except TaskInfeasible as error:
+            return Outcome(False, f"infeasible: {error}", skipped=dict(twin.skipped), infeasible=True)
         except (ValueError, FloatingPointError, RuntimeError) as error:
             return Outcome(False, f"planning failed: {error}", skipped=dict(twin.skipped))
         return Outcome(

@@ -50,6 +50,7 @@ def test_bad_requests_are_refused_with_a_reason(session, kwargs, reason):
     outcome = _ask(session, **kwargs)
     assert not outcome.planned and not outcome.success
     assert reason in outcome.message
+    assert outcome.infeasible == ("out of reach" in reason)
 
 
 def test_no_objects_yet_is_refused():
@@ -103,3 +104,22 @@ def test_cheaper_twin_merges_other_objects_and_still_plans():
     full._ensure_twin(1)
     assert s.twin.model.ngeom == full.twin.model.ngeom - 1
     s.close()
+
+
+def test_a_grasp_the_gripper_cannot_hold_is_refused_as_infeasible_and_a_rearrange_pushes_it():
+    wide = trimesh.creation.box(extents=(0.16, 0.15, 0.06))
+    T = np.eye(4)
+    T[:3, 3] = (0.0, 0.0, 0.03)
+    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
+    config.settle_s = 0.0
+    s = ManipulationSession(config, 0.01)
+    try:
+        s.set_objects([TwinObject(1, T, wide, [wide])], 0.0)
+        grasp = _ask(s, target=1)
+        assert not grasp.planned and grasp.infeasible
+        assert "cannot pick it up" in grasp.message and "15.0 cm" in grasp.message
+        rearrange = _ask(s, task="rearrange", target=1, displacement=(0.0, 0.1, 0.0))
+        assert rearrange.planned and not rearrange.infeasible
+        assert type(s.planner._last_reward).__name__ == "PushReward"
+    finally:
+        s.close()

@@ -162,11 +162,15 @@ class GraspReward(TaskReward):
         cannot pick it up."""
         if self.fingers is None or not self.fingers.known or self.grasp_site_moved:
             return False
-        angles = np.pi * np.arange(12) / 12
-        widths = [np.ptp(offsets_along(self.geometry, np.array([np.cos(a), np.sin(a)]))) for a in angles]
-        if min(widths) <= self.fingers.gap_m:
+        if self.narrowest_width_m <= self.fingers.gap_m:
             return False
         return not self.grasp_site_holds or search_grasp_site(self._grasp_target(), self.fingers) is None
+
+    @property
+    def narrowest_width_m(self) -> float:
+        """The target's least horizontal width over 12 directions across half a turn, m."""
+        angles = np.pi * np.arange(12) / 12
+        return float(min(np.ptp(offsets_along(self.geometry, np.array([np.cos(a), np.sin(a)]))) for a in angles))
 
     def _fits_between(self, axis_xy: np.ndarray, gap_m: float) -> bool:
         """The target fits between fingers gap_m apart (m) closing along axis_xy, with
