@@ -138,6 +138,9 @@ class PlannerConfig:
     # seed 1) against the rule fixed before the run (a rise on both), `arm` 46 -> 48 / 48 -> 49
     # (docs/experiments.md).
     hand_clearance: bool = False
+    # Grasp and rearrange: lower the site below a ledge just above the fingertips (a lamp's shade)
+    # that the closing fingers would otherwise land on and ride up (GraspReward.clear_ledges).
+    clear_ledges: bool = True
     # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
     # every axis to its goal instead of trying to pick it up.
     push_ungraspable: bool = True
@@ -300,6 +303,7 @@ class Planner:
                 fingers=self._open_fingers() if self.config.uses_hand_geometry else None,
                 clear_fingers=self.config.clear_fingers,
                 keep_fingers_off_target=self.config.hand_clearance,
+                clear_ledges=self.config.clear_ledges,
                 search_grasp_site=search,
             )
             if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push

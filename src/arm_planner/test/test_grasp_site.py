@@ -125,3 +125,43 @@ def test_a_target_narrower_than_the_fingers_along_some_axis_is_never_ungraspable
     reward = GraspReward(geometry=geometry, hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
     reward.grasp_site_holds = False  # as a lumpy reconstruction can leave it
     assert not reward.ungraspable
+
+
+def _lamp() -> list[trimesh.Trimesh]:
+    """A 6.4 cm lamp of three convex parts: a 2 cm base, a 6 mm pole, a shade 4 cm wide at its underside
+    (4.6 cm up) narrowing to 2.6 cm at the top; centre of mass in the shade."""
+    base = trimesh.creation.cylinder(radius=0.01, height=0.003)
+    base.apply_translation([0, 0, 0.0015])
+    pole = trimesh.creation.cylinder(radius=0.003, height=0.046)
+    pole.apply_translation([0, 0, 0.023])
+    angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.column_stack([np.cos(angles), np.sin(angles)])
+    rims = [np.column_stack([r * ring, np.full(24, z)]) for r, z in ((0.02, 0.046), (0.013, 0.064))]
+    shade = trimesh.convex.convex_hull(np.concatenate(rims))
+    return [p.apply_translation([0.5, 0.1, 0.0]) for p in (base, pole, shade)]
+
+
+def test_the_site_comes_down_below_a_shade_the_closing_fingers_would_ride_up():
+    parts = _lamp()
+    planes = [halfspaces(p) for p in parts]
+    vertices = np.concatenate([p.vertices for p in parts])
+    com = np.array([0.5, 0.1, 0.049])
+    geometry = TargetGeometry(com, vertices, 0.0, part_halfspaces=planes)
+    options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
+    plain = GraspReward(geometry=geometry, clear_ledges=False, **options)
+    cleared = GraspReward(geometry=geometry, **options)
+    assert plain.grasp_point[2] > 0.046 - 0.015 + FINGERS.tcp_above_tip_m + 0.005  # tips within 1 cm of the shade
+    tips = cleared.grasp_point[2] - FINGERS.tcp_above_tip_m
+    assert 0.046 - 0.017 <= tips <= 0.046 - 0.015 + 1e-6
+    assert np.allclose(cleared.grasp_offset, cleared.grasp_point - com)
+
+
+def test_walls_and_cones_have_no_ledge_and_keep_their_site():
+    for mesh in (trimesh.creation.box((0.05, 0.05, 0.12)), trimesh.creation.cone(0.04, 0.1), _u_shape()):
+        mesh = _on_table(mesh)
+        planes, vertices = _parts(mesh)
+        geometry = TargetGeometry(mesh.center_mass, vertices, 0.0, part_halfspaces=planes)
+        options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
+        plain = GraspReward(geometry=geometry, clear_ledges=False, **options)
+        cleared = GraspReward(geometry=geometry, **options)
+        assert np.allclose(plain.grasp_point, cleared.grasp_point)
