@@ -127,6 +127,13 @@ def test_a_target_narrower_than_the_fingers_along_some_axis_is_never_ungraspable
     assert not reward.ungraspable
 
 
+def _frustum(r_bottom: float, z_bottom: float, r_top: float, z_top: float) -> trimesh.Trimesh:
+    angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.column_stack([np.cos(angles), np.sin(angles)])
+    rims = [np.column_stack([r * ring, np.full(24, z)]) for r, z in ((r_bottom, z_bottom), (r_top, z_top))]
+    return trimesh.convex.convex_hull(np.concatenate(rims))
+
+
 def _lamp() -> list[trimesh.Trimesh]:
     """A 6.4 cm lamp of three convex parts: a 2 cm base, a 6 mm pole, a shade 4 cm wide at its underside
     (4.6 cm up) narrowing to 2.6 cm at the top; centre of mass in the shade."""
@@ -134,26 +141,33 @@ def _lamp() -> list[trimesh.Trimesh]:
     base.apply_translation([0, 0, 0.0015])
     pole = trimesh.creation.cylinder(radius=0.003, height=0.046)
     pole.apply_translation([0, 0, 0.023])
-    angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    ring = np.column_stack([np.cos(angles), np.sin(angles)])
-    rims = [np.column_stack([r * ring, np.full(24, z)]) for r, z in ((0.02, 0.046), (0.013, 0.064))]
-    shade = trimesh.convex.convex_hull(np.concatenate(rims))
-    return [p.apply_translation([0.5, 0.1, 0.0]) for p in (base, pole, shade)]
+    return [p.apply_translation([0.5, 0.1, 0.0]) for p in (base, pole, _frustum(0.02, 0.046, 0.013, 0.064))]
+
+
+def _site_with_and_without_ledges(parts: list[trimesh.Trimesh], com_z: float):
+    planes = [halfspaces(p) for p in parts]
+    vertices = np.concatenate([p.vertices for p in parts])
+    geometry = TargetGeometry(np.array([0.5, 0.1, com_z]), vertices, 0.0, part_halfspaces=planes)
+    options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
+    return GraspReward(geometry=geometry, clear_ledges=False, **options), GraspReward(geometry=geometry, **options)
 
 
 def test_the_site_comes_down_below_a_shade_the_closing_fingers_would_ride_up():
-    parts = _lamp()
-    planes = [halfspaces(p) for p in parts]
-    vertices = np.concatenate([p.vertices for p in parts])
-    com = np.array([0.5, 0.1, 0.049])
-    geometry = TargetGeometry(com, vertices, 0.0, part_halfspaces=planes)
-    options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
-    plain = GraspReward(geometry=geometry, clear_ledges=False, **options)
-    cleared = GraspReward(geometry=geometry, **options)
+    plain, cleared = _site_with_and_without_ledges(_lamp(), 0.049)
     assert plain.grasp_point[2] > 0.046 - 0.015 + FINGERS.tcp_above_tip_m + 0.005  # tips within 1 cm of the shade
     tips = cleared.grasp_point[2] - FINGERS.tcp_above_tip_m
     assert 0.046 - 0.017 <= tips <= 0.046 - 0.015 + 1e-6
-    assert np.allclose(cleared.grasp_offset, cleared.grasp_point - com)
+    assert np.allclose(cleared.grasp_offset, cleared.grasp_point - [0.5, 0.1, 0.049])
+
+
+def test_a_goblet_whose_bowl_keeps_widening_upwards_keeps_its_site():
+    """The bowl's foot widens sharply above the stem, but the fingers meet the bowl's widest part on
+    their faces, higher up: no ledge."""
+    pole = trimesh.creation.cylinder(radius=0.003, height=0.03)
+    pole.apply_translation([0.5, 0.1, 0.015])
+    bowl = _frustum(0.012, 0.03, 0.02, 0.064).apply_translation([0.5, 0.1, 0.0])
+    plain, cleared = _site_with_and_without_ledges([pole, bowl], 0.035)
+    assert np.allclose(plain.grasp_point, cleared.grasp_point)
 
 
 def test_walls_and_cones_have_no_ledge_and_keep_their_site():

@@ -150,9 +150,8 @@ class GraspReward(TaskReward):
         lowest = max(g.table_height_m + 0.015, g.top_z - self.grasp_max_depth_m)
         tip = self.grasp_point[2] - tip_above
         floor = max(tip - 0.002, g.table_height_m + 0.02)
-        scan = (floor - 0.004, tip + self.ledge_clearance_m)
-        ledges = ledge_heights(self.grasp_point, self.closing_axis, self.fingers, g.part_halfspaces, scan)
-        ledges = ledges[ledges >= floor]
+        window = (floor, tip + self.ledge_clearance_m)
+        ledges = ledge_heights(self.grasp_point, self.closing_axis, self.fingers, g.part_halfspaces, window)
         if len(ledges):
             z = max(float(ledges.min()) - self.ledge_clearance_m + tip_above, lowest)
             self.grasp_point = np.array([*self.grasp_point[:2], min(z, self.grasp_point[2])])
