@@ -149,7 +149,7 @@ def _site_with_and_without_ledges(parts: list[trimesh.Trimesh], com_z: float):
     vertices = np.concatenate([p.vertices for p in parts])
     geometry = TargetGeometry(np.array([0.5, 0.1, com_z]), vertices, 0.0, part_halfspaces=planes)
     options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
-    return GraspReward(geometry=geometry, clear_ledges=False, **options), GraspReward(geometry=geometry, **options)
+    return GraspReward(geometry=geometry, **options), GraspReward(geometry=geometry, clear_ledges=True, **options)
 
 
 def test_the_site_comes_down_below_a_shade_the_closing_fingers_would_ride_up():
@@ -176,6 +176,6 @@ def test_walls_and_cones_have_no_ledge_and_keep_their_site():
         planes, vertices = _parts(mesh)
         geometry = TargetGeometry(mesh.center_mass, vertices, 0.0, part_halfspaces=planes)
         options = dict(hand=None, target=None, qpos_offset=0, nq=0, fingers=FINGERS)
-        plain = GraspReward(geometry=geometry, clear_ledges=False, **options)
-        cleared = GraspReward(geometry=geometry, **options)
+        plain = GraspReward(geometry=geometry, **options)
+        cleared = GraspReward(geometry=geometry, clear_ledges=True, **options)
         assert np.allclose(plain.grasp_point, cleared.grasp_point)

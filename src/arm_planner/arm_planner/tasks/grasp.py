@@ -90,7 +90,7 @@ class GraspReward(TaskReward):
     # rim), the fingers, which begin to close up to max_close_distance_m above the site, land on its
     # slope and ride up over it: the site comes down until the tips are this far below the ledge
     # (not below 1.5 cm above the table, nor deeper than grasp_max_depth_m below the top).
-    clear_ledges: bool = True
+    clear_ledges: bool = False
     ledge_clearance_m: float = 0.015
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
