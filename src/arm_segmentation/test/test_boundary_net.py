@@ -18,6 +18,7 @@ from arm_segmentation.boundary_net import (
     build_network,
     shared_predictor,
 )
+from arm_segmentation.boundary_train import NORMAL_X_CHANNEL, crop_batch, frame_arrays
 from arm_segmentation.boundary_train import main as train_main
 from arm_segmentation.metrics import segmentation_metrics
 
@@ -97,6 +98,40 @@ def test_datagen_and_training_write_weights_the_segmentation_loads(tmp_path):
     probability = predictor.predict(features)
     assert probability.shape == (2, 240, 320) and np.all((probability >= 0) & (probability <= 1))
     assert train_main(args) == 0  # resumes from the saved state: already finished, scores and exports again
+    timed = tmp_path / "timed.pt"
+    args = ["--data", str(tmp_path / "data"), "--out", str(timed), "--steps", "0", "--minutes", "0.5",
+            "--batch", "2", "--crop-height", "32", "--crop-width", "32", "--threads", "1"]  # fmt: skip
+    assert train_main(args) == 0
+    state = torch.load(timed.with_suffix(".state"), weights_only=False)
+    assert state["step"] == state["steps"] >= 50 and timed.is_file()  # as many steps as the time allowed, all run
+
+
+def test_crops_are_windows_of_the_frames_mirrored_with_the_normal_turned():
+    rng = np.random.default_rng(0)
+    labels = np.zeros((24, 40), np.uint16)
+    labels[4:14, 5:20], labels[8:20, 18:33] = 1, 2
+    normals = rng.integers(-127, 128, (24, 40, 3)).astype(np.int8)
+    height = rng.uniform(0.0, 0.2, (24, 40)).astype(np.float16)
+    rgb = rng.integers(0, 256, (24, 40, 3)).astype(np.uint8)
+    features, targets = frame_arrays(rgb, np.full((24, 40), 0.8, np.float16), normals, height, labels)
+    assert targets[0].any() and (targets[1] == (labels > 0)).all() and targets[2].sum() > targets[1].sum()
+    generator = torch.Generator().manual_seed(1)
+    x, y = crop_batch(torch.from_numpy(features[None]), torch.from_numpy(targets[None]), generator, 16, (8, 12))
+    assert x.shape == (16, FEATURE_CHANNELS, 8, 12) and y.shape == (16, 3, 8, 12)
+    frame = features.astype(np.float32)
+    turn = np.where(np.arange(FEATURE_CHANNELS) == NORMAL_X_CHANNEL, -1, 1)[:, None, None]
+    mirrored = 0
+    for crop in x.numpy():
+        matches = []
+        for y0 in range(24 - 8 + 1):
+            for x0 in range(40 - 12 + 1):
+                window = frame[:, y0 : y0 + 8, x0 : x0 + 12]
+                for candidate, was_flipped in ((window, False), (window[:, :, ::-1] * turn, True)):
+                    if np.allclose(crop[3:], candidate[3:], atol=1e-3):  # colour is jittered, geometry is not
+                        matches.append(was_flipped)
+        assert matches, "a crop that is no window of the frame"
+        mirrored += matches[0]
+    assert 0 < mirrored < 16
 
 
 def test_shipped_weights_load_and_separate_differently_coloured_boxes():
