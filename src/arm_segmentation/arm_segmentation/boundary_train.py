@@ -223,7 +223,7 @@ def train(args) -> dict:
     generator.manual_seed(args.seed * 1_000_003 + step)
     deadline = start + 60.0 * args.minutes
     bar = tqdm(total=args.steps, initial=step, desc="seg_train", unit="step")
-    running = None
+    window_loss, window_steps = 0.0, 0  # summed on the device, read every 50 steps
 
     def save_state():
         state = {"model": model.state_dict(), "optimiser": optimiser.state_dict(),
@@ -243,11 +243,12 @@ def train(args) -> dict:
         schedule.step()
         step += 1
         bar.update(1)
+        window_loss, window_steps = window_loss + loss.detach(), window_steps + 1
         if step % 50 == 0 or step == args.steps:
-            value = loss.item()  # a device sync: not every step
-            running = value if running is None else 0.9 * running + 0.1 * value
-            bar.set_postfix(loss=f"{running:.4f}")
-            history.append((step, running))
+            mean = float(window_loss) / window_steps  # a device sync: not every step
+            window_loss, window_steps = 0.0, 0
+            bar.set_postfix(loss=f"{mean:.4f}")
+            history.append((step, mean))
         if step % args.save_every == 0:
             save_state()
     bar.close()
@@ -279,7 +280,7 @@ def write_model_card(out: pathlib.Path, config: dict, test: dict, history: list)
         steps, losses = zip(*history, strict=True)
         axis.plot(steps, losses)
     axis.set_xlabel("step")
-    axis.set_ylabel("training loss (running mean)")
+    axis.set_ylabel("training loss (mean of 50 steps)")
     figure.tight_layout()
     figure.savefig(out.with_name(out.stem + "_curves.png"), dpi=100)
     plt.close(figure)
