@@ -166,6 +166,19 @@ class DepthGrid:
         depth = np.where(filled, (inside - 0.5) * voxel_m, 0.0)
         return cls(np.asarray(origin_world, dtype=np.float64), float(voxel_m), depth)
 
+    @classmethod
+    def below_top(cls, origin_world: np.ndarray, voxel_m: float, filled: np.ndarray) -> DepthGrid:
+        """Depth straight down from the body's upper surface ([nx, ny, nz] bool, z up): how far a point
+        lies under the top of the material above it in its column (m). A finger that comes down on a
+        thin rim or wall is as deep in it as it has pushed down, where the distance to the nearest
+        surface (from_filled) never exceeds half the wall's thickness."""
+        filled = np.asarray(filled, dtype=bool)
+        z = np.arange(filled.shape[2])
+        empty_z = np.where(filled, filled.shape[2], z)  # the box's top counts as empty above
+        first_empty_above = np.flip(np.minimum.accumulate(np.flip(empty_z, axis=2), axis=2), axis=2)
+        depth = np.where(filled, (first_empty_above - z - 0.5) * voxel_m, 0.0)
+        return cls(np.asarray(origin_world, dtype=np.float64), float(voxel_m), depth)
+
     def depth_at(self, points_world: np.ndarray) -> np.ndarray:
         """[...] depth of each point [..., 3] inside the body (m); 0 outside the box."""
         index = np.floor((points_world - self.origin_world) / self.voxel_m).astype(np.int64)
@@ -193,8 +206,9 @@ class FingerIntrusion:
     """How much deeper than allowed the open fingers of a hand stand in a target as it stood when
     this was made (m): a finger that comes down on a tall or top-heavy object tips it over.
 
-    The target is a depth grid of it (DepthGrid); the allowance is how deep the fingers stand at the
-    hand's goal pose (hand_goal_pos, hand_goal_rot) plus allowance_m, so the goal itself costs nothing."""
+    The target is a depth grid of it (GraspReward gives it DepthGrid.below_top: how far a finger has
+    pushed down into it); the allowance is how deep the fingers stand at the hand's goal pose (hand_goal_pos,
+    hand_goal_rot) plus allowance_m, so the goal itself costs nothing."""
 
     def __init__(
         self,

@@ -117,6 +117,30 @@ def test_a_finger_coming_down_on_a_tall_object_is_deep_in_it_and_one_beside_it_i
     assert depth[1] > 0.005
 
 
+def _thin_walled_cup(wall_m=0.004, radius_m=0.03, height_m=0.08) -> Occupancy:
+    parts = [trimesh.creation.box((2 * radius_m, 2 * radius_m, wall_m)).apply_translation((0, 0, wall_m / 2))]
+    for k in range(12):
+        slab = trimesh.creation.box((wall_m, 0.017, height_m)).apply_translation(
+            (radius_m - wall_m / 2, 0, height_m / 2)
+        )
+        parts.append(slab.apply_transform(trimesh.transformations.rotation_matrix(np.pi * k / 6, (0, 0, 1))))
+    lo, hi = np.array([-0.04, -0.04, -0.004]), np.array([0.04, 0.04, height_m + 0.004])
+    return Occupancy.from_parts([halfspaces(p) for p in parts], lo, hi, 0.004)
+
+
+def test_a_finger_pushed_down_into_a_thin_rim_is_as_deep_as_it_pushed():
+    cup = _thin_walled_cup()
+    down = np.broadcast_to(np.diag([1.0, -1.0, -1.0]), (4, 3, 3))
+    points = finger_points_in_hand(FINGERS, spacing_m=0.015)
+    # centred (fingers outside), a finger tip 1.7 cm down into the rim, one in the open mouth, one beside
+    hands = np.array([[0.0, 0.0, 0.03], [0.0, 0.02, 0.07], [0.0, 0.035, 0.07], [0.0, 0.075, 0.05]])
+    nearest_surface = deepest_finger_m(hands, down, points, DepthGrid.from_filled(cup.origin_world, 0.004, cup.filled))
+    below_top = deepest_finger_m(hands, down, points, DepthGrid.below_top(cup.origin_world, 0.004, cup.filled))
+    assert nearest_surface.max() <= 0.002 + 1e-9, "a 4 mm wall is never deeper than 2 mm to its nearest surface"
+    assert below_top[1] == pytest.approx(0.018, abs=0.004)
+    assert below_top[0] == below_top[2] == below_top[3] == 0.0
+
+
 def test_a_tall_neighbour_under_the_palm_turns_the_axis_too():
     with_palm = OpenFingers(**(FINGERS.__dict__ | {"palm_length_m": 0.2, "palm_width_m": 0.04}))
     tall = [_block((0.085, 0.0, 0.10), size=(0.02, 0.02, 0.20))]  # beyond the +x finger, under the palm
