@@ -160,6 +160,16 @@ def evaluate(model, data: dict, threshold: float, device: str = "cpu") -> dict:
     }
 
 
+def training_step(model, optimiser, features, targets, generator, args):
+    """One optimiser step on a batch of crops (crop_batch); returns the loss (a tensor, not synced)."""
+    x, y = crop_batch(features, targets, generator, args.batch, (args.crop_height, args.crop_width))
+    loss = loss_fn(model(x), y, args.outline_weight, args.object_band_weight)
+    optimiser.zero_grad(set_to_none=True)
+    loss.backward()
+    optimiser.step()
+    return loss
+
+
 def step_seconds(model, features, targets, args, steps: int = 30) -> float:
     """Seconds per training step, timed on a copy of the model (the model is left untouched)."""
     import copy
@@ -174,11 +184,7 @@ def step_seconds(model, features, targets, args, steps: int = 30) -> float:
             if features.device.type == "cuda":
                 torch.cuda.synchronize(features.device)
             began = time.perf_counter()
-        x, y = crop_batch(features, targets, generator, args.batch, (args.crop_height, args.crop_width))
-        loss = loss_fn(trial(x), y, args.outline_weight, args.object_band_weight)
-        optimiser.zero_grad(set_to_none=True)
-        loss.backward()
-        optimiser.step()
+        loss = training_step(trial, optimiser, features, targets, generator, args)
     loss.item()
     return (time.perf_counter() - began) / steps
 
@@ -235,11 +241,7 @@ def train(args) -> dict:
     while step < args.steps and time.monotonic() < deadline:
         if step % args.reload_every == 0 and _shard_count(args.data) != shard_count:
             shard_count, (features, targets) = _shard_count(args.data), load_train()  # seg_datagen still writing
-        x, y = crop_batch(features, targets, generator, args.batch, (args.crop_height, args.crop_width))
-        loss = loss_fn(model(x), y, args.outline_weight, args.object_band_weight)
-        optimiser.zero_grad(set_to_none=True)
-        loss.backward()
-        optimiser.step()
+        loss = training_step(model, optimiser, features, targets, generator, args)
         schedule.step()
         step += 1
         bar.update(1)
