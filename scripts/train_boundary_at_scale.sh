@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The boundary network's frames and training on one CUDA machine (the recipe of the shipped
-# boundary.pt; its model card records the run).
+# The boundary network's frames and training on one CUDA machine (run 2026-11-28; the result was not
+# shipped, see docs/experiments.md).
 #   scripts/train_boundary_at_scale.sh DATA_DIR RUNS_DIR GEN_MINUTES TRAIN_MINUTES
 # Test frames: the 16 held-out-category scenes x 6 views every boundary.pt is scored on. Training
 # scenes are rendered by all cores for GEN_MINUTES (finished shards are kept, so a rerun adds to them),

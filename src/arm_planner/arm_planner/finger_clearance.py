@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-from scipy import ndimage
 
 
 @dataclass(frozen=True)
@@ -153,7 +152,10 @@ def finger_points_in_hand(fingers: OpenFingers, spacing_m: float = 0.01) -> np.n
 @dataclass(frozen=True)
 class DepthGrid:
     """How deep each voxel (edge voxel_m, metres) of a box starting at origin_world lies inside a
-    body: 0 outside, else about the distance to its surface (m)."""
+    body, measured straight down from its upper surface: 0 outside, else how far the voxel lies under
+    the top of the material above it in its column (m). A finger that comes down on a thin rim or
+    wall is as deep in it as it has pushed down (the distance to the nearest surface would never
+    exceed half the wall's thickness); one in a cup's open mouth is in nothing."""
 
     origin_world: np.ndarray
     voxel_m: float
@@ -161,17 +163,7 @@ class DepthGrid:
 
     @classmethod
     def from_filled(cls, origin_world: np.ndarray, voxel_m: float, filled: np.ndarray) -> DepthGrid:
-        padded = np.pad(filled, 1)
-        inside = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1]
-        depth = np.where(filled, (inside - 0.5) * voxel_m, 0.0)
-        return cls(np.asarray(origin_world, dtype=np.float64), float(voxel_m), depth)
-
-    @classmethod
-    def below_top(cls, origin_world: np.ndarray, voxel_m: float, filled: np.ndarray) -> DepthGrid:
-        """Depth straight down from the body's upper surface ([nx, ny, nz] bool, z up): how far a point
-        lies under the top of the material above it in its column (m). A finger that comes down on a
-        thin rim or wall is as deep in it as it has pushed down, where the distance to the nearest
-        surface (from_filled) never exceeds half the wall's thickness."""
+        """The grid of a voxelised body (filled: [nx, ny, nz] bool, z up)."""
         filled = np.asarray(filled, dtype=bool)
         z = np.arange(filled.shape[2])
         empty_z = np.where(filled, filled.shape[2], z)  # the box's top counts as empty above
@@ -206,9 +198,9 @@ class FingerIntrusion:
     """How much deeper than allowed the open fingers of a hand stand in a target as it stood when
     this was made (m): a finger that comes down on a tall or top-heavy object tips it over.
 
-    The target is a depth grid of it (GraspReward gives it DepthGrid.below_top: how far a finger has
-    pushed down into it); the allowance is how deep the fingers stand at the hand's goal pose (hand_goal_pos,
-    hand_goal_rot) plus allowance_m, so the goal itself costs nothing."""
+    The target is a depth grid of it (DepthGrid: how far a finger has pushed down into it); the
+    allowance is how deep the fingers stand at the hand's goal pose (hand_goal_pos, hand_goal_rot)
+    plus allowance_m, so the goal itself costs nothing."""
 
     def __init__(
         self,

@@ -57,27 +57,17 @@ def _load_shard(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([f for f, _ in frames]), np.stack([t for _, t in frames])
 
 
-class _Serial:
-    """ProcessPoolExecutor's map in this process."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    @staticmethod
-    def map(function, items):
-        return map(function, items)
-
-
 def load_split(root, split: str, workers: int = 1) -> dict[str, np.ndarray]:
     """All frames of a split: features (N, 9, H, W) float16 and targets (N, 3, H, W) uint8."""
     files = sorted((pathlib.Path(root) / split).glob("shard_*.npz"))
     if not files:
         raise FileNotFoundError(f"no shards in {pathlib.Path(root) / split} (run seg_datagen)")
-    with ProcessPoolExecutor(workers) if workers > 1 else _Serial() as pool:
-        parts = list(tqdm(pool.map(_load_shard, files), total=len(files), desc=f"loading {split}", unit="shard"))
+    bar = {"total": len(files), "desc": f"loading {split}", "unit": "shard"}
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            parts = list(tqdm(pool.map(_load_shard, files), **bar))
+    else:
+        parts = list(tqdm(map(_load_shard, files), **bar))
     return {"features": np.concatenate([f for f, _ in parts]), "targets": np.concatenate([t for _, t in parts])}
 
 
@@ -213,7 +203,7 @@ def train(args) -> dict:
         args.steps = int(state.get("steps", args.steps))
     elif args.steps == 0:
         seconds = 60.0 * args.minutes - (time.monotonic() - start)
-        args.steps = max(50, int(0.95 * seconds / step_seconds(model, features, targets, args)))
+        args.steps = max(50, int(0.8 * seconds / step_seconds(model, features, targets, args)))  # margin for load
         print(f"seg_train: {args.steps} steps fit in the {seconds:.0f} s left")
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, args.lr, total_steps=args.steps, pct_start=0.05)

@@ -135,7 +135,7 @@ class GraspReward(TaskReward):
             occupancy = Occupancy.from_parts(g.part_halfspaces, lo, hi, voxel_m)
             self._finger_intrusion = FingerIntrusion(
                 self.fingers,
-                DepthGrid.below_top(occupancy.origin_world, voxel_m, occupancy.filled),
+                DepthGrid.from_filled(occupancy.origin_world, voxel_m, occupancy.filled),
                 self.grasp_point,
                 hand_pointing_down(self.closing_axis),
                 self.finger_depth_allowance_m,
