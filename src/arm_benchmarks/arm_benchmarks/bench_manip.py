@@ -109,8 +109,22 @@ def ground_truth_objects(scene) -> list[TwinObject]:
     return objects
 
 
-def reconstructed_objects(method: str, frame) -> list[TwinObject]:
-    objects = reconstruct(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, method=method)
+# Closer to the paper's post-processing (intersections removed, convex parts; Section 3): without the
+# stable base, joined parts, depth snapping and solids of revolution that every method otherwise gets
+# (small parts dropped and floating ones supported from below remain).
+PAPER_POSTPROCESSING = {
+    "stable_base_tilt_deg": 0.0,
+    "join_parts": False,
+    "snap_to_depth": False,
+    "complete_revolutions": False,
+}
+
+
+def reconstructed_objects(method: str, frame, settings: dict | None = None) -> list[TwinObject]:
+    """The method's reconstruction of the frame's objects; settings: ReconstructionSettings fields."""
+    objects = reconstruct(
+        frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels, method=method, **(settings or {})
+    )
     return [
         TwinObject(o.id, o.T_world_object, o.mesh, o.convex_parts, o.visible_fraction, o.method)
         for o in objects
@@ -150,12 +164,25 @@ def reobservation(tracker: str, objects: list[TwinObject], frame, seed: int) -> 
 
 
 def run_method(
-    method, scene, target_index, frame, task, config, twin_timestep_s, period_steps, tracker="perfect", seed=0
+    method,
+    scene,
+    target_index,
+    frame,
+    task,
+    config,
+    twin_timestep_s,
+    period_steps,
+    tracker="perfect",
+    seed=0,
+    reconstruction_settings: dict | None = None,
 ) -> dict:
     started = time.perf_counter()
     row = {"method": method}
     try:
-        objects = ground_truth_objects(scene) if method == GROUND_TRUTH else reconstructed_objects(method, frame)
+        if method == GROUND_TRUTH:
+            objects = ground_truth_objects(scene)
+        else:
+            objects = reconstructed_objects(method, frame, reconstruction_settings)
     except Exception as error:  # a missing checkpoint makes the method unavailable; other errors fail it
         if type(error).__name__ in ("CheckpointError", "FileNotFoundError", "ImportError", "ModuleNotFoundError"):
             return row | {"success": False, "unavailable": f"{type(error).__name__}: {error}"}
@@ -316,6 +343,12 @@ def main(argv=None) -> int:
         help="grasp: bring the fingertips below a ledge just above them (a lamp's shade) so they do not ride up it",
     )
     parser.add_argument(
+        "--paper-postprocessing",
+        action="store_true",
+        help="reconstructed meshes without the stable base, joined parts, snapping to the depth and solids of "
+        "revolution (closer to the paper's post-processing: intersections removed, convex parts)",
+    )
+    parser.add_argument(
         "--hand-clearance",
         action=argparse.BooleanOptionalAction,
         default=PlannerConfig.hand_clearance,
@@ -444,6 +477,7 @@ def main(argv=None) -> int:
             ("clear_ledges", args.clear_ledges, PlannerConfig.clear_ledges),
             ("only_tasks", run_tasks, args.tasks),
             ("tracker", args.tracker, "perfect"),
+            ("paper_postprocessing", args.paper_postprocessing, False),
         )
         if value != default
     }
@@ -489,6 +523,7 @@ def main(argv=None) -> int:
                     period_steps,
                     args.tracker,
                     episode.seed,
+                    PAPER_POSTPROCESSING if args.paper_postprocessing else None,
                 )
                 row["run_key"] = key
                 sink.write(json.dumps(row) + "\n")
