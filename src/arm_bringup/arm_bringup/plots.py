@@ -8,17 +8,12 @@ import numpy as np
 from arm_bringup.scenes import render_scene_rgb
 from arm_core.camera import look_at
 from arm_interfaces.msg import ReconstructedObjectArray
+from arm_segmentation.visualization import overlay
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
 SIDE_VIEW = look_at((0.0, -0.9, 0.45), (0.0, 0.0, 0.05))  # T_world_camera of the side view
-
-
-def colourise(labels: np.ndarray) -> np.ndarray:
-    palette = np.random.default_rng(3).uniform(0.2, 1.0, (int(labels.max()) + 1, 3))
-    palette[0] = 0
-    return palette[labels]
 
 
 def _save(fig, axes, path: pathlib.Path, dpi: int) -> None:
@@ -29,16 +24,35 @@ def _save(fig, axes, path: pathlib.Path, dpi: int) -> None:
     plt.close(fig)
 
 
+def objects_crop(labels: np.ndarray, margin_px: int = 24) -> tuple[slice, slice]:
+    """Rows and columns of the box around every labelled pixel plus a margin (the whole image when none)."""
+    rows, cols = np.nonzero(labels)
+    if rows.size == 0:
+        return slice(None), slice(None)
+    height, width = labels.shape
+    return (
+        slice(max(0, rows.min() - margin_px), min(height, rows.max() + margin_px + 1)),
+        slice(max(0, cols.min() - margin_px), min(width, cols.max() + margin_px + 1)),
+    )
+
+
 def plot_camera_segmentation(path, rgb, depth_m, labels, segmented: bool, title: str) -> None:
-    """Camera image, depth and a label overlay (segmentation, or ground truth without it)."""
+    """Camera image, depth and the instances (segmentation, or ground truth without it) tinted and
+    numbered with their ids, the ids of the meshes on /arm/meshes, cropped to the objects."""
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     axes[0].imshow(rgb)
     axes[0].set_title(title)
     axes[1].imshow(np.where(depth_m > 0, depth_m, np.nan), cmap="viridis")
     axes[1].set_title("depth (m, noisy)")
-    overlay = 0.5 * rgb / 255.0 + 0.5 * colourise(labels)
-    axes[2].imshow(np.clip(overlay, 0, 1))
-    axes[2].set_title("segmentation overlay" if segmented else "ground-truth labels (no segmentation)")
+    crop = objects_crop(labels)
+    axes[2].imshow(overlay(rgb[crop], labels[crop]))
+    ids = [int(k) for k in np.unique(labels[crop]) if k > 0]
+    for k in ids:
+        rows, cols = np.nonzero(labels[crop] == k)
+        axes[2].text(cols.mean(), rows.mean(), str(k), color="white", fontsize=8, ha="center", va="center",
+                     bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "linewidth": 0})  # fmt: skip
+    name = "segmentation" if segmented else "ground-truth labels (no segmentation)"
+    axes[2].set_title(f"{name}: {len(ids)} instances, by id")
     _save(fig, axes, path, 90)
 
 
