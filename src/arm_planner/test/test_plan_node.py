@@ -41,6 +41,7 @@ def graph():
     yield node, client, action, received
     node.close()
     executor.shutdown()
+    thread.join(timeout=10.0)  # the spin loop ends before the context does: no wait set on a shut-down context
     node.destroy_node()
     client.destroy_node()
     rclpy.try_shutdown()
