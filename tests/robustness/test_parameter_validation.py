@@ -17,5 +17,5 @@ def outcomes(robustness_logs):
 def test_invalid_parameter_is_refused_at_start_up(outcomes, case):
     key, name, value, kind = case
     outcome = outcomes[(key, name)]
-    assert outcome["exit_code"] is not None, f"{key} kept running with {name}={value!r}"
+    assert outcome["exit_code"] is not None, f"{key} kept running with {name}={value!r}:\n{outcome['log_tail']}"
     assert outcome["ok"], outcome

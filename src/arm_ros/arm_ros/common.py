@@ -4,6 +4,7 @@ logs, diagnostics and a clean main loop. Imports rclpy: node modules only, never
 import os
 import random
 import re
+import sys
 import time
 
 import rclpy
@@ -152,8 +153,8 @@ def spin_until_shutdown(executor) -> None:
 def run_node(node_factory, args=None, executor_factory=None) -> int:
     """Run a node until SIGINT/SIGTERM and shut down cleanly; returns the exit code. An invalid
     parameter value or type (rclpy's
-    ParameterException, raised by declare_parameter on a range or type violation) exits with code 2
-    and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
+    ParameterException, raised by declare_parameter on a range or type violation) exits the process
+    with code 2 and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
     or take in flight end the process cleanly (exit code 0)."""
     rclpy.init(args=args)
     node = None
@@ -179,4 +180,11 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
+    if code == 2:
+        # The node never finished construction, so nothing of it is left to close. Its DDS handles,
+        # still referenced from the traceback, would be torn down at interpreter exit, where a teardown
+        # under load has been seen to hang; leave at once instead.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     return code

@@ -127,6 +127,14 @@ class NodeProcess:
         self._log.close()
         return self.process.returncode
 
+    def dump_stacks_and_stop(self, settle_s: float = 2.0) -> int:
+        """For a process that hangs: SIGABRT, which makes a process started with PYTHONFAULTHANDLER=1
+        write every thread's Python stack to its log, then stop it. Returns the exit code."""
+        if self.alive():
+            self.process.send_signal(signal.SIGABRT)
+            self.wait(settle_s)
+        return self.stop()
+
     def wait(self, timeout_s: float) -> int | None:
         try:
             return self.process.wait(timeout_s)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from arm_benchmarks.robustness.logs import tracebacks
 from arm_ros.processes import NodeProcess, node_built
 
@@ -17,21 +19,24 @@ PARAMETER_CASES = [
 ]
 
 
-def run_parameter_validation(log_dir, timeout_s: float = 60.0) -> list[dict]:
-    """Start every node with one invalid parameter (all at once); each must exit with code 2, name the
-    parameter and print no traceback."""
+def run_parameter_validation(log_dir, timeout_s: float = 120.0) -> list[dict]:
+    """Start every node with one invalid parameter (all at once); each must exit with code 2 within
+    timeout_s of its start, name the parameter and print no traceback. A node still running then has
+    its threads' stacks written to its log (SIGABRT + faulthandler) before it is stopped."""
     started = []
     for i, (key, name, value, _) in enumerate(PARAMETER_CASES):
         if node_built(key):
-            process = NodeProcess(key, log_dir / f"params_{i}" / f"{key}.log", params={name: value})
+            log = log_dir / f"params_{i}" / f"{key}.log"
+            process = NodeProcess(key, log, params={name: value}, env={"PYTHONFAULTHANDLER": "1"})
             started.append((i, process))
     results = []
     for i, process in started:
         key, name, value, kind = PARAMETER_CASES[i]
-        code = process.wait(timeout_s)
+        code = process.wait(max(0.0, process.started_s + timeout_s - time.monotonic()))
         if code is None:
-            process.stop()
+            process.dump_stacks_and_stop()
         log = process.log()
+        ok = code == 2 and name in log and not tracebacks(log)
         results.append(
             {
                 "node": key,
@@ -41,7 +46,8 @@ def run_parameter_validation(log_dir, timeout_s: float = 60.0) -> list[dict]:
                 "exit_code": code,
                 "names_parameter": name in log,
                 "tracebacks": tracebacks(log),
-                "ok": code == 2 and name in log and not tracebacks(log),
+                "ok": ok,
+                "log_tail": "" if ok else log[-2000:],
             }
         )
     return results
