@@ -1,5 +1,6 @@
 """The demo's manipulation request: one Manipulate goal for the most visible reachable reconstructed
-object, judged in the simulator by how the true object moved."""
+object (for a grasp or a rearrange, one the open gripper can span where there is one), judged in the
+simulator by how the true object moved."""
 
 import time
 
@@ -9,18 +10,37 @@ from rclpy.action import ActionClient
 
 from arm_bringup.scenes import objects_to_scene
 from arm_interfaces.action import Manipulate
+from arm_planner.tasks.base import narrowest_horizontal_width_m
+from arm_ros.conversions.meshes import msg_to_mesh
 from arm_ros.conversions.poses import pose_to_matrix
+from arm_sim.robot import FINGER_GAP_OPEN_M
 from arm_sim.world import ROBOT_BASE_XY
+
+# Reach of the arm from its shoulder, metres; side room a grasp leaves between object and fingers, metres.
+REACH_M = 0.7
+GRASP_SIDE_ROOM_M = 0.005
+
+
+def choose_target(objects, task: str):
+    """The most visible object within reach (of all objects if none is). A grasp or a rearrange
+    prefers objects whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on each side, fits
+    between the open fingers."""
+    shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
+    candidates = [o for o in objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < REACH_M]
+    candidates = candidates or list(objects)
+    if task in ("grasp", "rearrange"):
+        gap = FINGER_GAP_OPEN_M - 2 * GRASP_SIDE_ROOM_M
+        fitting = [o for o in candidates if narrowest_horizontal_width_m(msg_to_mesh(o.mesh)[0]) <= gap]
+        candidates = fitting or candidates
+    return max(candidates, key=lambda o: o.visible_fraction)
 
 
 def run_task(node, observer, meshes, truth, task: str) -> dict:
-    """Send one manipulation request for the most visible reconstructed object; judge it in the sim."""
+    """Send one manipulation request for choose_target's object; judge it in the sim."""
     client = ActionClient(node, Manipulate, "arm/manipulate")
     if not client.wait_for_server(timeout_sec=60.0):
         return {"error": "plan_node action server not available"}
-    shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
-    reachable = [o for o in meshes.objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < 0.7]
-    target = max(reachable or meshes.objects, key=lambda o: o.visible_fraction)
+    target = choose_target(meshes.objects, task)
     goal = Manipulate.Goal(
         task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id, meshes_stamp=meshes.header.stamp
     )

@@ -240,3 +240,13 @@ def test_coming_down_a_finger_that_would_land_on_the_target_costs_more_than_one_
     off = _tall_column_grasp(keep_fingers_off_target=False)
     scores = off(np.stack([on_top, beside]), np.zeros((2, 0)))
     assert scores[1] == pytest.approx(scores[0]), "without the term the two cost the same"
+
+
+def test_narrowest_horizontal_width_is_the_short_side_of_a_box_whatever_its_yaw():
+    from arm_planner.tasks.base import narrowest_horizontal_width_m
+
+    corners = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.03, 0.03) for z in (0.0, 0.2)])
+    for yaw in (0.0, np.pi / 12, np.pi / 3):
+        c, s = np.cos(yaw), np.sin(yaw)
+        rotated = corners @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+        assert narrowest_horizontal_width_m(rotated + [0.4, -0.2, 0.7]) == pytest.approx(0.06, abs=1e-9)

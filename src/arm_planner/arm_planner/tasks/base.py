@@ -149,6 +149,14 @@ class TaskReward:
         return np.maximum(floor - hand_pos[..., 2], 0.0)
 
 
+def narrowest_horizontal_width_m(vertices_world: np.ndarray, directions: int = 12) -> float:
+    """A vertex set's least horizontal width (world metres) over `directions` directions across half a
+    turn: what a parallel gripper closing horizontally must span at the least."""
+    angles = np.pi * np.arange(directions) / directions
+    axes = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return float(np.ptp(np.asarray(vertices_world)[:, :2] @ axes.T, axis=0).min())
+
+
 def offsets_along(geometry: TargetGeometry, direction_xy: np.ndarray) -> np.ndarray:
     """Each vertex's offset from the centre of mass along a horizontal unit direction (m)."""
     return (geometry.vertices_world[:, :2] - geometry.com_world[:2]) @ direction_xy

@@ -23,7 +23,14 @@ from arm_planner.finger_clearance import (
     hand_pointing_down,
 )
 from arm_planner.grasp_site import GraspTarget, Occupancy, find_grasp_site, ledge_heights, search_grasp_site
-from arm_planner.tasks.base import TaskReward, angle_down, offsets_along, tilt_beyond, yaw_error
+from arm_planner.tasks.base import (
+    TaskReward,
+    angle_down,
+    narrowest_horizontal_width_m,
+    offsets_along,
+    tilt_beyond,
+    yaw_error,
+)
 
 GRASP_STATES = ("ungrasped", "grasping", "grasped")
 
@@ -190,8 +197,7 @@ class GraspReward(TaskReward):
     @property
     def narrowest_width_m(self) -> float:
         """The target's least horizontal width over 12 directions across half a turn, m."""
-        angles = np.pi * np.arange(12) / 12
-        return float(min(np.ptp(offsets_along(self.geometry, np.array([np.cos(a), np.sin(a)]))) for a in angles))
+        return narrowest_horizontal_width_m(self.geometry.vertices_world)
 
     def _fits_between(self, axis_xy: np.ndarray, gap_m: float) -> bool:
         """The target fits between fingers gap_m apart (m) closing along axis_xy, with
