@@ -6,6 +6,7 @@ import matplotlib
 import numpy as np
 
 from arm_bringup.scenes import render_scene_rgb
+from arm_core.boxes import mask_box
 from arm_core.camera import look_at
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_segmentation.visualization import overlay
@@ -24,18 +25,6 @@ def _save(fig, axes, path: pathlib.Path, dpi: int) -> None:
     plt.close(fig)
 
 
-def objects_crop(labels: np.ndarray, margin_px: int = 24) -> tuple[slice, slice]:
-    """Rows and columns of the box around every labelled pixel plus a margin (the whole image when none)."""
-    rows, cols = np.nonzero(labels)
-    if rows.size == 0:
-        return slice(None), slice(None)
-    height, width = labels.shape
-    return (
-        slice(max(0, rows.min() - margin_px), min(height, rows.max() + margin_px + 1)),
-        slice(max(0, cols.min() - margin_px), min(width, cols.max() + margin_px + 1)),
-    )
-
-
 def plot_camera_segmentation(path, rgb, depth_m, labels, segmented: bool, title: str) -> None:
     """Camera image, depth and the instances (segmentation, or ground truth without it) tinted and
     numbered with their ids, the ids of the meshes on /arm/meshes, cropped to the objects."""
@@ -44,7 +33,7 @@ def plot_camera_segmentation(path, rgb, depth_m, labels, segmented: bool, title:
     axes[0].set_title(title)
     axes[1].imshow(np.where(depth_m > 0, depth_m, np.nan), cmap="viridis")
     axes[1].set_title("depth (m, noisy)")
-    crop = objects_crop(labels)
+    crop = mask_box(labels, margin_px=24) or (slice(None), slice(None))
     axes[2].imshow(overlay(rgb[crop], labels[crop]))
     ids = [int(k) for k in np.unique(labels[crop]) if k > 0]
     for k in ids:

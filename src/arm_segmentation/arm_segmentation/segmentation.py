@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from arm_core.boxes import mask_box
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_segmentation.boundary import (
@@ -240,15 +241,10 @@ def merge_scorer(stage: _Stage, rgb, outline, cluster: ClusterParams, grid, para
 def fine_crop(objects: np.ndarray, stride: int, shape: tuple[int, int], fine: FineParams):
     """Full-resolution (rows, cols) slices around the working-grid object pixels, or None when
     there are none or the crop would exceed fine.max_pixels."""
-    ys, xs = np.nonzero(objects)
-    if len(ys) == 0:
+    crop = mask_box(objects, fine.margin_px, stride, shape)
+    if crop is None or (crop[0].stop - crop[0].start) * (crop[1].stop - crop[1].start) > fine.max_pixels:
         return None
-    m = fine.margin_px
-    y0, x0 = max(int(ys.min()) * stride - m, 0), max(int(xs.min()) * stride - m, 0)
-    y1, x1 = min((int(ys.max()) + 1) * stride + m, shape[0]), min((int(xs.max()) + 1) * stride + m, shape[1])
-    if (y1 - y0) * (x1 - x0) > fine.max_pixels:
-        return None
-    return slice(y0, y1), slice(x0, x1)
+    return crop
 
 
 def _upsampled_crop(image: np.ndarray, crop, stride: int, full_shape) -> np.ndarray:

@@ -24,6 +24,7 @@ from arm_benchmarks.recon.scenes import (
     simulator_part_objects,
     twin_object,
 )
+from arm_core.boxes import mask_box
 from arm_reconstruction.checkpoint import CheckpointError
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings
 from arm_reconstruction.grid import DEFAULT_K, DEFAULT_RESOLUTION
@@ -95,11 +96,11 @@ def load_reconstructors(methods, checkpoint_dir: str = "", pipeline: dict | None
 
 
 def _crop_box(mask: np.ndarray, pad: float = 0.25, min_px: int = 48) -> tuple[int, int, int, int]:
-    rows, cols = np.nonzero(mask)
     h, w = mask.shape
-    if len(rows) == 0:
+    box = mask_box(mask)
+    if box is None:
         return 0, h, 0, w
-    r0, r1, c0, c1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    r0, r1, c0, c1 = box[0].start, box[0].stop, box[1].start, box[1].stop
     half = max(min_px, int((1 + 2 * pad) * max(r1 - r0, c1 - c0))) // 2
     rc, cc = (r0 + r1) // 2, (c0 + c1) // 2
     return max(0, rc - half), min(h, rc + half), max(0, cc - half), min(w, cc + half)

@@ -1,0 +1,22 @@
+import numpy as np
+
+from arm_core.boxes import mask_box
+
+
+def test_box_spans_the_mask_with_the_margin_and_stays_inside_the_image():
+    mask = np.zeros((100, 120), dtype=bool)
+    mask[40:50, 60:70] = True
+    mask[45, 5] = True
+    assert mask_box(mask, margin_px=10) == (slice(30, 60), slice(0, 80))
+    assert mask_box(mask) == (slice(40, 50), slice(5, 70))
+    assert mask_box(np.zeros((4, 4), dtype=bool)) is None
+
+
+def test_box_of_a_coarse_mask_is_in_the_pixels_of_the_full_image():
+    coarse = np.zeros((240, 320), dtype=np.uint8)
+    coarse[100:120, 50:90] = 1
+    assert mask_box(coarse, margin_px=12, stride=2) == (slice(188, 252), slice(88, 192))
+    assert mask_box(coarse, stride=2, shape=(470, 630))[0] == slice(200, 240)
+    edge = np.zeros((240, 320), dtype=bool)
+    edge[239, 319] = True
+    assert mask_box(edge, margin_px=5, stride=2, shape=(479, 639)) == (slice(473, 479), slice(633, 639))
