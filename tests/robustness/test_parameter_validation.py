@@ -1,4 +1,5 @@
-"""Every node refuses invalid parameters at start-up with a clear message and exit code 2 (no traceback)."""
+"""Every node refuses invalid parameters at start-up with a clear message naming itself and the
+parameter, and exit code 2 (no traceback)."""
 
 import pytest
 

@@ -12,6 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 
@@ -150,6 +151,18 @@ def spin_until_shutdown(executor) -> None:
             raise
 
 
+def _node_refused_in_constructor(error: BaseException):
+    """The node whose constructor raised error (the innermost rclpy Node with a handle bound to `self`
+    in the traceback), so that the message can name it; None if there is none."""
+    found, tb = None, error.__traceback__
+    while tb is not None:
+        candidate = tb.tb_frame.f_locals.get("self")
+        if isinstance(candidate, Node) and hasattr(candidate, "_Node__node"):
+            found = candidate
+        tb = tb.tb_next
+    return found
+
+
 def run_node(node_factory, args=None, executor_factory=None) -> int:
     """Run a node until SIGINT/SIGTERM and shut down cleanly; returns the exit code. An invalid
     parameter value or type (rclpy's
@@ -167,7 +180,8 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, ParameterException) as error:
-        name = node.get_name() if node is not None else "node"
+        named = node or _node_refused_in_constructor(error)
+        name = named.get_name() if named is not None else "node"
         print(f"[{name}] invalid configuration: {error}", flush=True)
         code = 2
     except Exception:
@@ -181,9 +195,8 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     if code == 2:
-        # The node never finished construction, so nothing of it is left to close. Its DDS handles,
-        # still referenced from the traceback, would be torn down at interpreter exit, where a teardown
-        # under load has been seen to hang; leave at once instead.
+        # Nothing ran; leave at once rather than through interpreter teardown, which once hung here
+        # under load (a node refused in its constructor is never destroyed before it).
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)

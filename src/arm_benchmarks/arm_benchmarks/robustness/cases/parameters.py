@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 
 from arm_benchmarks.robustness.logs import tracebacks
-from arm_ros.processes import NodeProcess, node_built
+from arm_ros.processes import NODES, NodeProcess, node_built
 
 PARAMETER_CASES = [
     ("segmentation", "sync_queue_size", 0, "range"),
@@ -21,8 +21,9 @@ PARAMETER_CASES = [
 
 def run_parameter_validation(log_dir, timeout_s: float = 120.0) -> list[dict]:
     """Start every node with one invalid parameter (all at once); each must exit with code 2 within
-    timeout_s of its start, name the parameter and print no traceback. A node still running then has
-    its threads' stacks written to its log (SIGABRT + faulthandler) before it is stopped."""
+    timeout_s of its start, name itself and the parameter, and print no traceback. A node still
+    running then has its threads' stacks written to its log (SIGABRT + faulthandler) before it is
+    stopped."""
     started = []
     for i, (key, name, value, _) in enumerate(PARAMETER_CASES):
         if node_built(key):
@@ -36,7 +37,8 @@ def run_parameter_validation(log_dir, timeout_s: float = 120.0) -> list[dict]:
         if code is None:
             process.dump_stacks_and_stop()
         log = process.log()
-        ok = code == 2 and name in log and not tracebacks(log)
+        names_node = f"[{NODES[key][1]}] invalid configuration" in log
+        ok = code == 2 and name in log and names_node and not tracebacks(log)
         results.append(
             {
                 "node": key,
@@ -45,6 +47,7 @@ def run_parameter_validation(log_dir, timeout_s: float = 120.0) -> list[dict]:
                 "kind": kind,
                 "exit_code": code,
                 "names_parameter": name in log,
+                "names_node": names_node,
                 "tracebacks": tracebacks(log),
                 "ok": ok,
                 "log_tail": "" if ok else log[-2000:],
