@@ -40,7 +40,7 @@ from arm_bags.bags import (
     message_class,
     shift_stamps,
 )
-from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, spin_until_shutdown
+from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, exit_refused, spin_until_shutdown
 from arm_ros.conversions.stamps import ns_to_time
 
 FRAME_TOPICS = [
@@ -302,7 +302,7 @@ def main(args=None) -> int:
         return 2
     rclpy.init(args=args)  # rclpy's SIGINT/SIGTERM handlers shut the context down: play() then returns
     node = executor = spinner = None
-    code = 0
+    code = refused = 0
     try:
         overrides = [Parameter("bag", value=argv[0])] if argv else []
         node = BagReplayer(parameter_overrides=overrides)
@@ -321,7 +321,7 @@ def main(args=None) -> int:
         code = 2
     except (ValueError, ParameterException) as error:
         print(f"[bag_replayer] invalid configuration: {error}", flush=True)
-        code = 2
+        code = refused = 2
     except Exception:  # a publish that SIGINT/SIGTERM caught in flight
         if rclpy.ok():
             raise
@@ -334,6 +334,8 @@ def main(args=None) -> int:
             node.reader.close()
             node.destroy_node()
         rclpy.try_shutdown()
+    if refused:
+        exit_refused(refused)
     return code
 
 

@@ -195,9 +195,14 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     if code == 2:
-        # Nothing ran; leave at once rather than through interpreter teardown, which once hung here
-        # under load (a node refused in its constructor is never destroyed before it).
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+        exit_refused(code)
     return code
+
+
+def exit_refused(code: int = 2) -> None:
+    """End a process whose node was refused at start-up, after rclpy's shutdown: flush and leave at
+    once rather than through interpreter teardown, which once hung under load (a node refused in its
+    constructor is never destroyed before it)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
