@@ -156,6 +156,18 @@ class PlanNode(Node):
             self, "stream_lead_s", 0.5, "Stream: motion planned before the first part, s", 0.0, 60.0
         )
         self.stream_period_s = declare(self, "stream_period_s", 0.2, "Stream: motion planned per part, s", 0.0, 60.0)
+        self.execute_unmet = declare(
+            self,
+            "execute_unmet",
+            True,
+            "Publish a plan that did not meet the task in the twin (false: hold it back and say so in the "
+            "result; needs stream false and replan_period_s 0, where nothing moves before the plan is done)",
+        )
+        if not self.execute_unmet and (self.stream or self.replan_period_s > 0):
+            raise ValueError(
+                "execute_unmet false needs stream false and replan_period_s 0: a streamed or re-planned "
+                "motion is under way before the plan is done"
+            )
         self.max_replans = declare(self, "max_replans", 10, "Closed loop: re-plans per goal at most", 0, 1000)
         self.feedback_every = declare(self, "feedback_every_steps", 10, "Publish feedback every N steps", 1, 1000)
         self.joint_state_timeout_s = declare(
@@ -421,8 +433,14 @@ class PlanNode(Node):
             result = outcome.result
             return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
         outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
-        if not outcome.planned or self.replan_period_s <= 0:
-            return outcome, (self._publish(outcome) if outcome.planned else JointTrajectory())
+        if not outcome.planned:
+            return outcome, JointTrajectory()
+        if self.replan_period_s <= 0 and not outcome.success and not self.execute_unmet:
+            outcome.message += "; not executed (execute_unmet is false)"
+            result = outcome.result
+            return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
+        if self.replan_period_s <= 0:
+            return outcome, self._publish(outcome)
         start_com, resume = outcome.start_com_world, None
         executed_times, executed_positions, executed_s = [], [], 0.0  # the chunks one after another
         for _ in range(self.max_replans + 1):

@@ -175,6 +175,22 @@ def test_streamed_parts_join_into_the_plan(graph):
             assert due.setdefault(start + k, t) == pytest.approx(t, abs=1e-5)
 
 
+def test_a_plan_the_twin_did_not_meet_is_held_back_when_asked(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    node.stream, node.execute_unmet = False, False
+    try:
+        before = len(received)
+        result = _send(action, Manipulate.Goal.TASK_GRASP, 4)  # 5 steps: never met
+    finally:
+        node.stream, node.execute_unmet = True, True
+    assert not result.success and "not executed" in result.message
+    assert len(result.trajectory.points) == 5
+    time.sleep(0.5)
+    assert len(received) == before
+
+
 def test_goal_plans_on_the_meshes_its_stamp_names(graph):
     node, client, action, _ = graph
     for object_id, stamp_s in ((4, 100), (7, 101)):  # the same box, relabelled in a later frame
