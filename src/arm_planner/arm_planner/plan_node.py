@@ -372,12 +372,14 @@ class PlanNode(Node):
             }
         return outcome
 
-    def _publish(self, outcome: Outcome, count: int | None = None) -> JointTrajectory:
+    def _publish(self, outcome: Outcome, count: int | None = None, publish: bool = True) -> JointTrajectory:
+        """The outcome's first count points as a trajectory, sent to the controller when execute and
+        publish are both true."""
         result = outcome.result
         n = len(result.times_s) if count is None else count
         msg = trajectory_msg(result.joint_names, result.times_s[:n], result.joint_positions[:n])
         msg.header.stamp = self.get_clock().now().to_msg()
-        if self.execute_plans and n:
+        if self.execute_plans and publish and n:
             self.pub_trajectory.publish(msg)
         return msg
 
@@ -435,12 +437,11 @@ class PlanNode(Node):
         outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
         if not outcome.planned:
             return outcome, JointTrajectory()
-        if self.replan_period_s <= 0 and not outcome.success and not self.execute_unmet:
-            outcome.message += "; not executed (execute_unmet is false)"
-            result = outcome.result
-            return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
         if self.replan_period_s <= 0:
-            return outcome, self._publish(outcome)
+            held_back = not outcome.success and not self.execute_unmet
+            if held_back:
+                outcome.message += "; not executed (execute_unmet is false)"
+            return outcome, self._publish(outcome, publish=not held_back)
         start_com, resume = outcome.start_com_world, None
         executed_times, executed_positions, executed_s = [], [], 0.0  # the chunks one after another
         for _ in range(self.max_replans + 1):
