@@ -2,7 +2,7 @@ SHELL := /bin/bash
 ENV := source scripts/env.sh
 ARGS ?=
 
-.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose clean
+.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose bench-real clean
 
 setup:
 	@scripts/bootstrap.sh
@@ -33,6 +33,10 @@ bench-robustness: setup
 
 bench-camera-pose: setup
 	@$(ENV) && bench_camera_pose $(ARGS)
+
+REAL ?= ../shared/real/osd_learn ../shared/real/osd_learn_uncropped ../shared/real/ycb_tables
+bench-real: setup
+	@$(ENV) && bench_real $(REAL) $(ARGS)
 
 clean:
 	rm -rf build install log

@@ -26,6 +26,7 @@ setup(
             "bench_manip_pool = arm_benchmarks.manip_pool:main",
             "bench_robustness = arm_benchmarks.bench_robustness:main",
             "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
+            "bench_real = arm_benchmarks.bench_real:main",
             "bench_pushability = arm_benchmarks.pushability:main",
     ]},
 )

@@ -162,9 +162,6 @@ def score_scene(frame) -> dict:
         latency_ms = 1e3 * (time.perf_counter() - start)
         cpu_ms = 1e3 * (time.process_time() - start_cpu)
         metrics = segmentation_metrics(labels, gt)
-        predicted = labels > 0
-        metrics["instances_per_object"] = metrics["n_pred"] / result["n_visible"] if result["n_visible"] else np.nan
-        metrics["background_fp_fraction"] = float(np.mean(gt[predicted] == 0)) if predicted.any() else 0.0
         result[name] = {
             **{k: float(metrics[k]) for k in METRIC_KEYS},
             "n_pred": metrics["n_pred"],

@@ -5,10 +5,12 @@ max_roll_deg about its optical axis.
 The support plane is found by sequential RANSAC (batched hypotheses, vectorized over points) on a
 random subsample of the valid depth pixels, each plane refined by weighted least squares on its
 inliers. Candidates are planes that can lie under the camera (walls and ceilings cannot, see
-plane_problem) and cover a solid region of the image (not the tops of clutter). The largest by area
-and the planes parallel to it covering at least min_support_area_m2 (or half its area), one per
-level min_level_gap_m apart, are the support levels; the one the camera looks at wins (seen nearest
-the image centre), so a table over the floor around it and the work table over a second one behind.
+plane_problem) and cover a solid region of the image (not the tops of clutter). The plane seen in
+most pixels and the planes parallel to it covering at least min_support_area_m2 (or half its area),
+one per level min_level_gap_m apart, are the support levels; the one the camera looks at wins (seen
+nearest the image centre), so a table over the floor around it and the work table over a second one
+behind. Returns beyond max_range_m (far walls, a sensor's outliers at many metres) take no part:
+weighted by the area they cover, a few of them would outvote the table.
 
 World frame of the estimate (gravity-aligned, metres):
   z   the plane normal, pointing up (towards the camera); the table top is z = 0;
@@ -44,6 +46,7 @@ class CameraPoseEstimate:
 @dataclass
 class CameraPoseParams:
     max_points: int = 20000  # valid pixels subsampled for the search
+    max_range_m: float = 3.5  # returns farther from the camera are ignored (walls, outliers)
     hypotheses: int = 256  # RANSAC planes tried per search ...
     scoring_points: int = 4000  # ... each scored on this many of the points (refinement uses all)
     max_planes: int = 5  # planes extracted one after the other
@@ -139,14 +142,19 @@ def _dense_share(u: np.ndarray, v: np.ndarray, inliers: np.ndarray, shape, param
     return float(on_plane[dominated].sum() / max(on_plane.sum(), 1))
 
 
-def valid_points(depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator) -> np.ndarray:
-    """Camera-frame points (N, 3) of a random subsample of the valid depth pixels."""
+def valid_points(
+    depth_m: np.ndarray, K: np.ndarray, max_points: int, rng: np.random.Generator, max_range_m: float = np.inf
+) -> tuple[np.ndarray, int]:
+    """(points, n): camera-frame points (N, 3) of a random subsample of the n valid depth pixels
+    whose return lies within max_range_m of the camera."""
     depth_m = np.asarray(depth_m, dtype=np.float32)
     valid = (np.isfinite(depth_m) & (depth_m > 0)).ravel()
     points = backproject_image(np.where(valid.reshape(depth_m.shape), depth_m, 0.0), K).reshape(-1, 3)[valid]
+    points = points[np.linalg.norm(points, axis=1) <= max_range_m]
+    n_valid = len(points)
     if len(points) > max_points:
         points = points[rng.choice(len(points), max_points, replace=False)]
-    return points.astype(np.float64)
+    return points.astype(np.float64), n_valid
 
 
 def plane_problem(plane: np.ndarray, params: CameraPoseParams) -> str:
@@ -221,10 +229,11 @@ def estimate_camera_pose(
     if depth_m.ndim != 2 or K.shape != (3, 3):
         raise CameraPoseError(f"expected an HxW depth image and a 3x3 K, got {depth_m.shape} and {K.shape}")
     rng = np.random.default_rng(rng_seed)
-    n_valid = int(np.count_nonzero(np.isfinite(depth_m) & (depth_m > 0)))
+    points, n_valid = valid_points(depth_m, K, params.max_points, rng, params.max_range_m)
     if n_valid < params.min_valid_pixels:
-        raise CameraPoseError(f"too few valid depth pixels: {n_valid} < {params.min_valid_pixels}")
-    points = valid_points(depth_m, K, params.max_points, rng)
+        raise CameraPoseError(
+            f"too few valid depth pixels within {params.max_range_m} m: {n_valid} < {params.min_valid_pixels}"
+        )
     planes = support_planes(points, params, rng)
     if not planes or max(inliers.mean() for _, inliers in planes) < params.min_inlier_fraction:
         raise CameraPoseError(
@@ -242,14 +251,16 @@ def estimate_camera_pose(
     scale = n_valid / len(points)
     fx_fy = K[0, 0] * K[1, 1]
     areas = [_plane_area_m2(points[inliers], plane, fx_fy, scale) for plane, inliers in usable]
-    largest = int(np.argmax(areas))
+    # seen in most pixels, not largest in m^2: a far strip of wall or floor, or a sensor's far
+    # outliers, can cover more square metres than the table in front of the camera
+    largest = int(np.argmax([inliers.sum() for _, inliers in usable]))
     cos_parallel = np.cos(np.radians(params.parallel_deg))
     min_area = min(params.min_support_area_m2, 0.5 * areas[largest])
     largest_plane = usable[largest][0]
     # support levels parallel to the largest plane, one per height: of planes closer than
     # min_level_gap_m to each other (a sliver along the table's noisy fringe) the larger one stands
     supports = []
-    for i in sorted(range(len(usable)), key=lambda i: -areas[i]):
+    for i in sorted(range(len(usable)), key=lambda i: (i != largest, -areas[i])):
         plane = usable[i][0]
         if i != largest and not (
             plane[:3] @ largest_plane[:3] > cos_parallel
@@ -283,7 +294,7 @@ def plane_inlier_fraction(
     """Share of a subsample of the valid depth pixels within the inlier distance of a known plane:
     a cheap check that an earlier estimate still holds for a new frame."""
     params = params or CameraPoseParams()
-    points = valid_points(depth_m, K, params.max_points // 4, np.random.default_rng(rng_seed))
+    points, _ = valid_points(depth_m, K, params.max_points // 4, np.random.default_rng(rng_seed), params.max_range_m)
     if len(points) == 0:
         return 0.0
     distances = np.abs(points @ plane_camera[:3] + plane_camera[3])

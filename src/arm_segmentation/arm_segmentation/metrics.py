@@ -46,7 +46,9 @@ def segmentation_metrics(prediction: np.ndarray, ground_truth: np.ndarray) -> di
     """UOIS metrics of one label image against its ground truth (both HxW integer, 0 = no object).
 
     Returns overlap_{precision,recall,f}, boundary_{precision,recall,f}, f_at_75 (fraction of
-    ground-truth objects detected with overlap F > 0.75), n_pred, n_gt.
+    ground-truth objects detected with overlap F > 0.75), n_pred, n_gt, instances_per_object
+    (n_pred / n_gt, NaN without objects) and background_fp_fraction (share of the predicted object
+    pixels that are background in the ground truth).
     """
     prediction = np.asarray(prediction)
     ground_truth = np.asarray(ground_truth)
@@ -58,7 +60,13 @@ def segmentation_metrics(prediction: np.ndarray, ground_truth: np.ndarray) -> di
     pred_index = pred_index.reshape(prediction.shape)
     n_gt = int(np.count_nonzero(gt_ids))
     n_pred = int(np.count_nonzero(pred_ids))
-    result = {"n_pred": n_pred, "n_gt": n_gt}
+    predicted = prediction != 0
+    result = {
+        "n_pred": n_pred,
+        "n_gt": n_gt,
+        "instances_per_object": n_pred / n_gt if n_gt else float("nan"),
+        "background_fp_fraction": float(np.mean(ground_truth[predicted] == 0)) if predicted.any() else 0.0,
+    }
     if n_gt == 0 or n_pred == 0:
         perfect = float(n_gt == 0 and n_pred == 0)
         p = 1.0 if n_pred == 0 else 0.0

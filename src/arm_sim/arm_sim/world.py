@@ -265,11 +265,7 @@ class SimWorld:
 
     # --- rendering ---------------------------------------------------------------------------
     def _place_camera(self, T_world_camera: np.ndarray) -> None:
-        quat = np.zeros(4)
-        mujoco.mju_mat2Quat(quat, (T_world_camera[:3, :3] @ OPTICAL_TO_MUJOCO).reshape(9))
-        self.model.cam_pos[self._camera_id] = T_world_camera[:3, 3]
-        self.model.cam_quat[self._camera_id] = quat
-        mujoco.mj_camlight(self.model, self.data)
+        place_camera(self.model, self.data, self._camera_id, T_world_camera)
 
     def render(
         self,
@@ -337,6 +333,15 @@ class SimWorld:
             if renderer is not None:
                 renderer.close()
         self._renderer = self._segmentation_renderer = None
+
+
+def place_camera(model: mujoco.MjModel, data: mujoco.MjData, camera_id: int, T_world_camera: np.ndarray) -> None:
+    """Moves a model's camera to the optical frame T_world_camera (x right, y down, z forward)."""
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, (np.asarray(T_world_camera, dtype=np.float64)[:3, :3] @ OPTICAL_TO_MUJOCO).reshape(9))
+    model.cam_pos[camera_id] = T_world_camera[:3, 3]
+    model.cam_quat[camera_id] = quat
+    mujoco.mj_camlight(model, data)
 
 
 def _single_sample_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
