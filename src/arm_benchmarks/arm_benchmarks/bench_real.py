@@ -266,7 +266,8 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
         lines.append(
             f"| {name} | {s['frames']} | {s['support_found']} | {len(s['empty_frames'])} | "
             f"{_fmt(s['instances_per_frame'], digits=2)} | {_fmt(s['stable_fraction'])} | "
-            f"{_fmt(s['resting_fraction'])} | {_fmt(noise.get('held_fraction'))} | {_fmt(s['time_s_median'], digits=2)} | "
+            f"{_fmt(s['resting_fraction'])} | {_fmt(noise.get('held_fraction'))} | "
+            f"{_fmt(s['time_s_median'], digits=2)} | "
             f"{_fmt(s['segmentation_s_median'])} | {_fmt(m.get('overlap_f'))} | {_fmt(m.get('boundary_f'))} | "
             f"{_fmt(m.get('f_at_75'))} | {_fmt(m.get('instances_per_object'), digits=2)} | "
             f"{_fmt(m.get('background_fp_fraction'))} |"

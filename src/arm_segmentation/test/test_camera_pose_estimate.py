@@ -170,3 +170,21 @@ def test_picks_the_table_it_looks_at_over_a_higher_one_behind():
     estimate = estimate_camera_pose(depth, K)
     assert gravity_error_deg(estimate.T_world_camera, T_true) < 0.5
     assert abs(estimate.T_world_camera[2, 3] - 0.6) < 0.005
+
+
+def test_a_far_strip_and_outliers_do_not_outvote_a_table_filling_the_view():
+    # a RealSense over a wooden table: the table fills the view, the top rows see a surface 2.6-3.1 m
+    # away on a plane 13 deg steeper than the table (a wall's base seen through a thin strip can be fit
+    # so), and some returns lie 10-17 m off
+    T_true = look_at((-0.5, 0.0, 0.6), (0.2, 0.0, 0.0))
+    _, depth, _, K = render(BOXES, T_true, table_levels=((0.0, 3.0),))
+    rng = np.random.default_rng(5)
+    depth = add_noise(depth, rng)
+    rows = 40
+    ray_y = (np.arange(rows)[:, None] - K[1, 2]) / K[1, 1]
+    depth[:rows] = 0.745 / (0.573 + 0.819 * ray_y)  # the plane -0.819 y - 0.573 z + 0.745 = 0
+    far = rng.random(depth.shape) < 0.01
+    depth[far] = rng.uniform(10.0, 17.0, far.sum())
+    estimate = estimate_camera_pose(depth, K)
+    assert gravity_error_deg(estimate.T_world_camera, T_true) < 0.5
+    assert abs(estimate.T_world_camera[2, 3] - 0.6) < 0.005
