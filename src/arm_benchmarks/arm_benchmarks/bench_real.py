@@ -87,8 +87,8 @@ def perturbed_depth(depth_m: np.ndarray, K: np.ndarray, rng: np.random.Generator
     noise, disparity quantisation, drop-outs at edges) without its range cut, then +-1 mm of
     re-quantisation to whole millimetres."""
     noisy = apply_depth_noise(depth_m, K, rng, DepthNoise(min_range_m=0.0, max_range_m=np.inf))
-    noisy = np.round(noisy * 1000.0 + rng.uniform(-1.0, 1.0, noisy.shape)) / 1000.0
-    return np.where(noisy > 0, noisy, 0.0).astype(np.float32)
+    requantised = np.round(noisy * 1000.0 + rng.uniform(-1.0, 1.0, noisy.shape)) / 1000.0
+    return np.where(noisy > 0, requantised, 0.0).astype(np.float32)  # no return stays no return
 
 
 def support_fields(T_world_camera: np.ndarray) -> dict:
@@ -158,6 +158,7 @@ def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng
         "pose_source": entry.get("pose_source"),
         "inlier_fraction": entry.get("pose_inlier_fraction"),
         "instances": entry.get("n_segmented", 0),
+        "empty_reason": entry.get("empty_reason", ""),
         "reconstructed": entry.get("n_reconstructed", 0),
         "time_s": entry["timings_s"].get("total"),
         "segmentation_s": entry["timings_s"].get("segmentation"),
@@ -217,7 +218,7 @@ def aggregate(rows: list[dict]) -> dict:
         "frames": len(rows),
         "support_found": sum(r["support_found"] for r in rows),
         "failed_frames": {r["frame"]: r["error"] for r in rows if not r["ok"]},
-        "empty_frames": [r["frame"] for r in ok if r["instances"] == 0],
+        "empty_frames": {r["frame"]: r["empty_reason"] for r in ok if r["instances"] == 0},
         "instances": sum(r["instances"] for r in ok),
         "instances_per_frame": mean([r["instances"] for r in ok]),
         "objects_simulated": len(objects),
@@ -277,7 +278,7 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
         if s["failed_frames"]:
             lines += [f"- failed: `{frame}`: {error}" for frame, error in s["failed_frames"].items()]
         if s["empty_frames"]:
-            lines.append(f"- no instance: {', '.join(s['empty_frames'])}")
+            lines += [f"- no instance in `{frame}`: {reason}" for frame, reason in s["empty_frames"].items()]
         if "noise" in s:
             n = s["noise"]
             lines.append(

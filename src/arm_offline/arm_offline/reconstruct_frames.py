@@ -37,6 +37,7 @@ from arm_offline.inputs import (
     load_poses,
 )
 from arm_reconstruction.checkpoint import CheckpointError
+from arm_reconstruction.messages import main_table_height
 from arm_reconstruction.pipeline import ReconstructedObject, ReconstructionSettings, Reconstructor
 from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
 from arm_segmentation.segmentation import SegmentationParams, segment_detailed
@@ -74,17 +75,12 @@ def camera_pose(depth_m: np.ndarray, K: np.ndarray, given: np.ndarray | None) ->
 
 
 def table_support(objects: list[ReconstructedObject], levels: list[SupportLevel]) -> tuple[float, np.ndarray | None]:
-    """(table height in metres, footprint xy of the support level nearest to it): the median of the
-    table heights the reconstruction used under its objects, else the segmentation's largest level."""
-    heights = [obj.grid.table_height_m for obj in objects if obj.ok and obj.grid is not None]
-    if heights:
-        height_m = float(np.median(heights))
-    elif levels:
-        height_m = float(levels[0].height_m)
-    else:
-        return 0.0, None
-    nearest = min(levels, key=lambda level: abs(level.height_m - height_m), default=None)
-    return height_m, nearest.hull_xy if nearest is not None and abs(nearest.height_m - height_m) < 0.02 else None
+    """(table height in metres, its footprint xy or None): the segmentation's table level (the one
+    the objects stand on; higher levels stand on it), else the table height the reconstruction saw
+    under its objects."""
+    if levels:
+        return float(levels[0].height_m), levels[0].hull_xy
+    return main_table_height(objects), None
 
 
 def object_entry(obj: ReconstructedObject, labels: np.ndarray, files: dict, body: str | None) -> dict:
@@ -184,6 +180,7 @@ class FrameReconstructor:
         return {
             "table_height_m": round(table_height_m, 5),
             "n_segmented": len(objects),
+            "empty_reason": segmentation.empty_reason,
             "n_reconstructed": sum(o.ok for o in objects),
             "overlay": OVERLAY_FILE,
             "labels": LABELS_FILE,

@@ -60,8 +60,12 @@ def object_from_msg(msg: ReconstructedObjectMsg) -> ReconstructedObject:
 
 
 def main_table_height(objects: list[ReconstructedObject], default_m: float = 0.0) -> float:
-    """Median table height under the reconstructed objects (default_m when there are none)."""
-    heights = [o.grid.table_height_m for o in objects if o.grid is not None and o.ok]
+    """Median table height under the reconstructed objects whose grid saw a support (default_m when
+    none did). An object without a support in view (its grid starts at its own lowest point, table
+    source 'object') says nothing of the table: a patch found on top of a box would lift the table
+    to the box's top."""
+    grids = [o.grid for o in objects if o.grid is not None and o.ok]
+    heights = [g.table_height_m for g in grids if g.table_source != "object"]
     return float(np.median(heights)) if heights else float(default_m)
 
 

@@ -18,7 +18,7 @@ from arm_ros.colour import as_rgb8_msg
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_camera_msgs, labels_from_msg, segmented_frame_msg
 from arm_ros.conversions.images import numpy_to_image
-from arm_segmentation.segmentation import SegmentationParams, segment
+from arm_segmentation.segmentation import SegmentationParams, segment_detailed
 from arm_segmentation.visualization import overlay
 
 _UNDISTORTER = Undistorter()  # remap maps cached per camera, shared by the frames of this process
@@ -67,15 +67,19 @@ def segment_frame(
     segmenting; exclude_fn(frame) -> HxW bool marks pixels that are never objects (the robot's self
     mask). The SegmentedFrame carries the depth message's header, the camera's camera_info (D
     zeroed when the images were undistorted) and pose. Raises FrameError."""
+    reason = ""
     try:
         if labels_msg is not None:
             frame.labels = labels_from_msg(labels_msg, frame.depth_m.shape)
+            reason = "" if frame.labels.any() else "the ground-truth masks hold no object"
         else:
             exclude = exclude_fn(frame) if exclude_fn is not None else None
-            frame.labels = segment(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, params, exclude)
+            result = segment_detailed(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, params, exclude)
+            frame.labels, reason = result.labels, result.empty_reason
     except (ConversionError, FrameInputError) as error:
         raise FrameError(str(error)) from error
     segmented = segmented_frame_msg(frame, depth_msg.header, undistorted_info(info_msg), pose_msg.pose)
+    segmented.empty_reason = reason
     overlay_msg = numpy_to_image(overlay(frame.rgb, frame.labels), "rgb8", depth_msg.header)
     return segmented, overlay_msg
 

@@ -21,6 +21,7 @@ from arm_segmentation.boundary import (
 )
 from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
+from arm_segmentation.fragments import FragmentParams, absorb_fragments
 from arm_segmentation.geometry import preprocess_depth
 from arm_segmentation.label_stats import label_maximum
 from arm_segmentation.merge_model import LearnedMerge, MergeParams, pixel_statistics, shared_classifier
@@ -98,6 +99,7 @@ class SegmentationParams:
     boundary: BoundaryParams = field(default_factory=BoundaryParams)
     merge: MergeParams = field(default_factory=MergeParams)
     outline: OutlineParams = field(default_factory=OutlineParams)
+    fragments: FragmentParams = field(default_factory=FragmentParams)
 
 
 @dataclass
@@ -107,6 +109,22 @@ class SegmentationResult:
     levels: list[SupportLevel]
     # HxW float32 object probability of the boundary network at full resolution (None without it)
     objectness: np.ndarray | None = None
+    empty_reason: str = ""  # why there is no instance ('' when there is one)
+
+
+def empty_reason(labels: np.ndarray, levels: list[SupportLevel], params: SegmentationParams) -> str:
+    """Why a frame gave no instance, in words a user can act on ('' when it gave one)."""
+    if np.any(labels):
+        return ""
+    if not levels:
+        return (
+            f"no support: no horizontal surface of at least {params.table.min_table_area_m2} m^2 is seen under "
+            "this camera pose (is T_world_camera's z up, and is the table in view?)"
+        )
+    return (
+        f"nothing stands on the support at {levels[0].height_m:+.3f} m: no object between the table band and "
+        f"{params.table.max_object_height_m} m above it"
+    )
 
 
 def local_table_chroma(chroma: np.ndarray, table: np.ndarray, window_px: int) -> np.ndarray:
@@ -371,7 +389,9 @@ def segment_detailed(
         labels = refine_outline(labels, rgb_full, depth_full, objectness, outline_classifier, params.outline)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
-    return SegmentationResult(labels=labels, table_mask=table, levels=stage.levels, objectness=objectness)
+    labels = absorb_fragments(labels, depth_full, K_full, params.fragments)
+    reason = empty_reason(labels, stage.levels, params)
+    return SegmentationResult(labels, table, stage.levels, objectness, reason)
 
 
 def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int = 0) -> np.ndarray:

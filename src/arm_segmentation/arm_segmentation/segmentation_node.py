@@ -160,6 +160,7 @@ class SegmentationNode(Node):
         self.frames_rejected = 0
         self.last_latency_ms = 0.0
         self.last_instances = 0
+        self.last_empty_reason = ""
         self.last_error = ""
         self.messages_skipped_for_goals = 0
         self.goals = declare_goal_pause(self, "camera frames")
@@ -254,12 +255,17 @@ class SegmentationNode(Node):
         self.frames_published += 1
         self.last_latency_ms = 1e3 * (time.perf_counter() - start)
         self.last_instances = len(frame.instance_ids)
+        self.last_empty_reason = frame.empty_reason
+        if frame.empty_reason:
+            self.get_logger().warning(f"no instance: {frame.empty_reason}", throttle_duration_sec=5.0)
 
     def publish_diagnostics(self) -> None:
         level = DiagnosticStatus.OK
         message = "ok"
         if self.frames_rejected and self.last_error:
             level, message = DiagnosticStatus.WARN, f"last rejected frame: {self.last_error}"
+        elif self.last_empty_reason:
+            level, message = DiagnosticStatus.WARN, f"last frame had no instance: {self.last_empty_reason}"
         values = {
             "frames_published": self.frames_published,
             "frames_rejected": self.frames_rejected,
@@ -267,6 +273,7 @@ class SegmentationNode(Node):
             "stale_messages_dropped": self.sync.stats.dropped_stale,
             "last_latency_ms": self.last_latency_ms,
             "last_instances": self.last_instances,
+            "last_empty_reason": self.last_empty_reason,
             "ground_truth_masks": self.use_ground_truth,
             "self_filter": self.self_filter,
             "joint_states_received": self.joint_q is not None,

@@ -58,10 +58,20 @@ def test_finds_objects_on_two_table_levels():
     assert m["n_pred"] == 2 and m["overlap_f"] > 0.9
 
 
-def test_empty_table_gives_no_instances():
+def test_empty_table_gives_no_instances_and_says_why():
     rgb, depth, gt, K = render([], CAMERA)
-    labels = segment(rgb, add_noise(depth, np.random.default_rng(2)), K, CAMERA)
-    assert labels.max() == 0
+    result = segment_detailed(rgb, add_noise(depth, np.random.default_rng(2)), K, CAMERA)
+    assert result.labels.max() == 0
+    assert result.empty_reason.startswith("nothing stands on the support")
+
+
+def test_a_pose_without_a_table_under_it_says_so():
+    rgb, depth, gt, K = render(touching_and_stacked(), CAMERA)
+    upside_down = CAMERA.copy()
+    upside_down[:3, :3] = np.diag([1.0, -1.0, -1.0]) @ CAMERA[:3, :3]  # world z points down
+    result = segment_detailed(rgb, depth, K, upside_down)
+    assert result.labels.max() == 0 and result.empty_reason.startswith("no support")
+    assert segment_detailed(rgb, depth, K, CAMERA).empty_reason == ""
 
 
 def test_perfectly_flat_table_seen_from_above():

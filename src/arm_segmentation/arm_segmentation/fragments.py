@@ -1,0 +1,87 @@
+"""Fragments: instances too small to be an object on their own.
+
+On real depth a box's top face, a printed patch or a rim often comes out as a separate instance a
+few square centimetres large, and which ones do changes from frame to frame with the sensor's noise.
+An instance whose visible area is under min_instance_area_m2 and whose outline runs mostly
+(min_contact_share) along one larger instance at the same depth is part of it and joins it: a small
+object beside another touches it along a side, not all round. One that touches no instance at its
+depth is dropped when it is also under min_isolated_area_m2 (too small to reconstruct or grasp).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FragmentParams:
+    min_instance_area_m2: float = 0.0015  # 15 cm^2, a 4 x 4 cm patch seen face-on
+    min_contact_share: float = 0.6  # of the fragment's outline pixel pairs, along the instance it joins
+    min_isolated_area_m2: float = 0.0002  # 2 cm^2
+    contact_depth_m: float = 0.015  # neighbouring pixels of two instances this close in depth touch
+    contact_reach_px: int = 2  # pixels up to this far apart along a row or a column are neighbours
+
+
+def visible_areas_m2(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(max label + 1,) area (m^2) each instance covers facing the camera, from its pixels with depth."""
+    weight = np.where(depth_m > 0, depth_m.astype(np.float64) ** 2, 0.0) / (K[0, 0] * K[1, 1])
+    return np.bincount(labels.ravel(), weights=weight.ravel(), minlength=int(labels.max()) + 1)
+
+
+def _neighbour_pairs(image: np.ndarray, reach_px: int):
+    """(first, second) views of every pair of pixels 1..reach_px apart along a row or a column."""
+    for shift in range(1, reach_px + 1):
+        yield image[:, :-shift], image[:, shift:]
+        yield image[:-shift, :], image[shift:, :]
+
+
+def contact_counts(labels: np.ndarray, depth_m: np.ndarray, params: FragmentParams) -> tuple[np.ndarray, np.ndarray]:
+    """(touching, outline): (n+1, n+1) symmetric counts of neighbouring pixel pairs of two different
+    instances whose depths differ by less than contact_depth_m, and (n+1,) counts of the neighbouring
+    pixel pairs across each instance's outline (to anything: table, background, another instance);
+    n = max label."""
+    n = int(labels.max()) + 1
+    codes, sides = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
+    label_pairs = _neighbour_pairs(labels, params.contact_reach_px)
+    depth_pairs = _neighbour_pairs(depth_m, params.contact_reach_px)
+    for (a, b), (da, db) in zip(label_pairs, depth_pairs, strict=True):
+        across = a != b
+        sides += [a[across].astype(np.int64), b[across].astype(np.int64)]
+        touching = across & (a > 0) & (b > 0) & (da > 0) & (db > 0) & (np.abs(da - db) < params.contact_depth_m)
+        codes.append(a[touching].astype(np.int64) * n + b[touching])
+    counts = np.bincount(np.concatenate(codes), minlength=n * n).reshape(n, n)
+    return counts + counts.T, np.bincount(np.concatenate(sides), minlength=n)
+
+
+def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, params: FragmentParams) -> np.ndarray:
+    """Labels with each fragment given to the larger instance it touches most at its depth (a chain
+    of fragments ends in the object), or dropped (see the module docstring); renumbered 1..N in the
+    order of the original ids."""
+    n = int(labels.max())
+    if n == 0:
+        return labels
+    areas = visible_areas_m2(labels, depth_m, K)
+    present = np.bincount(labels.ravel(), minlength=n + 1) > 0
+    fragment = present & (areas < params.min_instance_area_m2)
+    fragment[0] = False
+    if not fragment.any():
+        return labels
+    touching, outline = contact_counts(labels, depth_m, params)
+    touching[:, 0] = 0
+    owner = np.arange(n + 1)
+    for i in np.flatnonzero(fragment):
+        share = np.where(areas > areas[i], touching[i], 0) / max(outline[i], 1)
+        if share.max() >= params.min_contact_share:
+            owner[i] = int(np.argmax(share))
+        elif not touching[i].any() and areas[i] < params.min_isolated_area_m2:
+            owner[i] = 0
+    for _ in range(n):  # follow chains (fragment -> larger fragment -> object) to their end
+        following = owner[owner]
+        if np.array_equal(following, owner):
+            break
+        owner = following
+    merged = owner[labels]
+    used = np.unique(merged[merged > 0])
+    remap = np.zeros(n + 1, dtype=labels.dtype)
+    remap[used] = np.arange(1, len(used) + 1)
+    return remap[merged]
