@@ -337,12 +337,6 @@ def main(argv=None) -> int:
         help="grasp where the target's material lies between the fingers when its centre of mass has none there",
     )
     parser.add_argument(
-        "--clear-ledges",
-        action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.clear_ledges,
-        help="grasp: bring the fingertips below a ledge just above them (a lamp's shade) so they do not ride up it",
-    )
-    parser.add_argument(
         "--paper-postprocessing",
         action="store_true",
         help="reconstructed meshes without the stable base, joined parts, snapping to the depth and solids of "
@@ -427,7 +421,6 @@ def main(argv=None) -> int:
     config.grasp_site_search = args.grasp_site_search
     config.push_ungraspable = args.push_ungraspable
     config.hand_clearance = args.hand_clearance
-    config.clear_ledges = args.clear_ledges
     config.object_friction = args.friction
     config.merge_other_objects = args.node_twin or args.merge_other_objects
     config.rest_creeping_every_step = args.node_twin or args.rest_creeping
@@ -474,7 +467,6 @@ def main(argv=None) -> int:
             ("grasp_site_search", args.grasp_site_search, PlannerConfig.grasp_site_search),
             ("push_ungraspable", args.push_ungraspable, PlannerConfig.push_ungraspable),
             ("hand_clearance", args.hand_clearance, PlannerConfig.hand_clearance),
-            ("clear_ledges", args.clear_ledges, PlannerConfig.clear_ledges),
             ("only_tasks", run_tasks, args.tasks),
             ("tracker", args.tracker, "perfect"),
             ("paper_postprocessing", args.paper_postprocessing, False),

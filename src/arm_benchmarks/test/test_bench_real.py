@@ -20,7 +20,8 @@ def labelled_folder(tmp_path_factory):
     true instance labels and no pose (the benchmark estimates it)."""
     folder = tmp_path_factory.mktemp("real_layout")
     rng = np.random.default_rng(4)
-    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=3, scale_range=(1.0, 1.4), domain="plain")
+    pool = object_pool(split="train", seed=0)
+    scene = cluttered_scene(pool, rng, n_objects=3, scale_range=(1.0, 1.4), domain="plain")
     world = SimWorld(scene, robot_arm=False, width=320, height=240)
     centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
     frame = world.render(look_at(centre + (0.4, 0.1, 0.5), centre), rng=rng)

@@ -201,37 +201,3 @@ def search_grasp_site(
     return best
 
 
-def ledge_heights(
-    point_world: np.ndarray,
-    axis_xy: np.ndarray,
-    fingers: OpenFingers,
-    part_halfspaces: list[np.ndarray],
-    z_range_m: tuple[float, float],
-    row_m: float = 0.002,
-    rise_m: float = 0.01,
-    below_m: float = 0.004,
-    above_m: float = 0.015,
-    flat_m: float = 0.002,
-) -> np.ndarray:
-    """World heights (m) in z_range_m where the target, between the open fingers of a TCP over
-    point_world closing along axis_xy, widens along the axis by at least rise_m within below_m going
-    up and grows no more than flat_m wider within above_m above: the underside of a part that narrows
-    or keeps its width upwards (a lamp's shade), not the foot of a bowl that keeps widening. Fingers
-    whose tips stand just above such a ledge meet its slope first as they close and ride up over it."""
-    axis = np.asarray(axis_xy, dtype=np.float64)[:2]
-    axis = axis / (np.linalg.norm(axis) + 1e-12)
-    offsets = _rotate(span_offsets(fingers, samples_along=int(np.ceil(fingers.gap_m / row_m)) + 1), axis[None])[0]
-    lag, ahead = max(1, int(round(below_m / row_m))), max(1, int(round(above_m / row_m)))
-    heights = np.arange(z_range_m[0] - lag * row_m, z_range_m[1] + (ahead + 0.5) * row_m, row_m)
-    xy = np.broadcast_to(point_world[:2] + offsets, (len(heights), len(offsets), 2))
-    z = np.broadcast_to(heights[:, None, None], (len(heights), len(offsets), 1))
-    inside = inside_parts(np.concatenate([xy, z], axis=-1), part_halfspaces).reshape(len(heights), len(offsets))
-    along = offsets @ axis
-    lo = np.where(inside, along, np.inf).min(axis=1)
-    hi = np.where(inside, along, -np.inf).max(axis=1)
-    width = np.where(inside.any(axis=1), hi - lo, 0.0)
-    rows = np.arange(lag, len(heights) - ahead)
-    rise = width[rows] - width[rows - lag]
-    peak = np.lib.stride_tricks.sliding_window_view(width, ahead + 1)[rows]
-    ledge = (rise >= rise_m) & (peak.max(axis=1) <= width[rows] + flat_m)
-    return heights[rows][ledge]

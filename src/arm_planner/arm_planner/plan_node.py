@@ -118,12 +118,6 @@ def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
         PlannerConfig.hand_clearance,
         "Grasp: coming down, keep the open fingers out of the target and the palm off other objects",
     )
-    config.clear_ledges = declare(
-        node,
-        "clear_ledges",
-        PlannerConfig.clear_ledges,
-        "Grasp: bring the fingertips below a ledge just above them (a lamp's shade) so they do not ride up it",
-    )
     config.grasp_site_search = declare(
         node,
         "grasp_site_search",

@@ -138,12 +138,6 @@ class PlannerConfig:
     # seed 1) against the rule fixed before the run (a rise on both), `arm` 46 -> 48 / 48 -> 49
     # (docs/experiments.md).
     hand_clearance: bool = False
-    # Grasp and rearrange: lower the site below a ledge just above the fingertips (a lamp's shade)
-    # that the closing fingers would otherwise land on and ride up (GraspReward.clear_ledges). Off:
-    # on the 23 lamp episodes of the 99-episode design's grasp and rearrange, ground truth 19 -> 20
-    # (seed 0 lost 2, seed 1 gained 3), `arm` 17 -> 16; the lamps held under the shade's rim slip
-    # out as often (docs/experiments.md).
-    clear_ledges: bool = False
     # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
     # every axis to its goal instead of trying to pick it up.
     push_ungraspable: bool = True
@@ -306,7 +300,6 @@ class Planner:
                 fingers=self._open_fingers() if self.config.uses_hand_geometry else None,
                 clear_fingers=self.config.clear_fingers,
                 keep_fingers_off_target=self.config.hand_clearance,
-                clear_ledges=self.config.clear_ledges,
                 search_grasp_site=search,
             )
             if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push

@@ -32,6 +32,7 @@ class ClusterParams:
     depth_jump_m: float = 0.006
     depth_jump_per_m: float = 0.012
     concave_threshold: float = 0.35
+    crease_reach: int = 3  # creases are also looked for between pixels this many steps apart (a sensor rounds them)
     use_colour: bool = True
     chroma_edge_threshold: float = 0.15
     merge_chroma_threshold: float = 0.16
@@ -119,6 +120,16 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
         cut |= (convexity < -params.concave_threshold) & normal_valid[a] & normal_valid[b]
         geometric[a] |= cut & mask[a] & mask[b]
         geometric[b] |= cut & mask[a] & mask[b]
+        if params.crease_reach > 1:  # a crease the sensor rounded over several steps
+            wide_a, wide_b = _shifted((shift[0] * params.crease_reach, shift[1] * params.crease_reach))
+            d = points_camera[wide_a] - points_camera[wide_b]
+            dn = normals_camera[wide_a] - normals_camera[wide_b]
+            wide = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
+            wide = (wide < -params.concave_threshold) & normal_valid[wide_a] & normal_valid[wide_b]
+            wide &= mask[wide_a] & mask[wide_b]
+            for end in (wide_a, wide_b):
+                geometric[end] |= wide
+                edge[end] |= wide
         if chroma is not None:
             cut |= np.abs(chroma[a] - chroma[b]).sum(axis=-1) > params.chroma_edge_threshold
         cut &= mask[a] & mask[b]

@@ -6,6 +6,7 @@ An instance whose visible area is under min_instance_area_m2 and whose outline r
 (min_contact_share) along one larger instance at the same depth is part of it and joins it: a small
 object beside another touches it along a side, not all round. One that touches no instance at its
 depth is dropped when it is also under min_isolated_area_m2 (too small to reconstruct or grasp).
+Instances seen mostly without depth have no measured size and are left alone.
 """
 
 from dataclasses import dataclass
@@ -61,8 +62,12 @@ def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, par
     if n == 0:
         return labels
     areas = visible_areas_m2(labels, depth_m, K)
-    present = np.bincount(labels.ravel(), minlength=n + 1) > 0
-    fragment = present & (areas < params.min_instance_area_m2)
+    pixels = np.bincount(labels.ravel(), minlength=n + 1)
+    with_depth = np.bincount(labels.ravel(), weights=(depth_m > 0).ravel(), minlength=n + 1)
+    # an instance seen mostly without depth (dark, shiny, nearer than the sensor's range) has no
+    # measured size: it is left as it is
+    measured = (pixels > 0) & (with_depth >= 0.5 * pixels)
+    fragment = measured & (areas < params.min_instance_area_m2)
     fragment[0] = False
     if not fragment.any():
         return labels

@@ -389,6 +389,7 @@ def segment_detailed(
         labels = refine_outline(labels, rgb_full, depth_full, objectness, outline_classifier, params.outline)
     if exclude is not None and np.any(labels[exclude]):
         labels = _renumber(np.where(exclude, 0, labels))
+    labels = drop_beside_support(labels, stage, stride, params.table)
     labels = absorb_fragments(labels, depth_full, K_full, params.fragments)
     reason = empty_reason(labels, stage.levels, params)
     return SegmentationResult(labels, table, stage.levels, objectness, reason)
@@ -482,6 +483,28 @@ def drop_support_structure(labels, points_world, depth_m, support, levels, param
     if not np.any(drop):
         return labels
     return _renumber(np.where(drop[labels], 0, labels))
+
+
+def drop_beside_support(labels, stage: _Stage, stride: int, params: TableParams) -> np.ndarray:
+    """Labels without the instances that lie mostly outside every support level's footprint (the
+    convex hull of the table seen, without margin): a wall rising behind the table's far edge, or
+    furniture past it, reaches into the footprint's margin but stands beside the table."""
+    sampled = labels[::stride, ::stride][: stage.valid.shape[0], : stage.valid.shape[1]]
+    ys, xs = np.nonzero((sampled > 0) & (stage.smoothed > 0))
+    if not stage.levels or len(ys) == 0:
+        return labels
+    xy = stage.points_world[ys, xs, :2]
+    over = np.zeros(len(ys), dtype=bool)
+    for level in stage.levels:
+        over |= level.contains_xy(xy)
+    n = int(labels.max()) + 1
+    seen = np.bincount(sampled[ys, xs], minlength=n)
+    share = np.bincount(sampled[ys, xs], weights=over, minlength=n) / np.maximum(seen, 1)
+    beside = (seen > 0) & (share < params.min_share_over_support)
+    beside[0] = False
+    if not beside.any():
+        return labels
+    return _renumber(np.where(beside[labels], 0, labels))
 
 
 def _renumber(labels: np.ndarray) -> np.ndarray:

@@ -24,6 +24,9 @@ class TableParams:
     band_per_m2: float = 0.003
     footprint_margin_m: float = 0.03
     max_object_height_m: float = 0.6
+    # an instance with less than this share of its points over a support's footprint stands beside
+    # the table, not on it (a wall behind it, furniture past its edge)
+    min_share_over_support: float = 0.5
 
 
 @dataclass(frozen=True)

@@ -39,8 +39,13 @@ def test_geometry_alone_splits_a_stack_at_the_concave_crease():
     ]
     rgb, depth, gt, K = render(boxes, CAMERA)
     params = SegmentationParams(working_stride=1, cluster=ClusterParams(use_colour=False))
-    m = segmentation_metrics(segment(rgb, depth, K, CAMERA, params), gt)
-    assert m["n_pred"] == 2 and m["overlap_f"] > 0.85
+    labels = segment(rgb, depth, K, CAMERA, params)
+    m = segmentation_metrics(labels, gt)
+    assert m["f_at_75"] == 1.0 and m["overlap_f"] > 0.85, "each box is one instance"
+    # the crease band (ClusterParams.crease_reach) may cut off a sliver of the lower box's top face
+    # where it is narrower than the band behind the upper box
+    sizes = np.sort(np.bincount(labels.ravel())[1:])[::-1]
+    assert m["n_pred"] <= 3 and sizes[2:].sum() < 0.02 * sizes.sum()
 
 
 def test_finds_objects_on_two_table_levels():

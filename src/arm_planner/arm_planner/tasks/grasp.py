@@ -22,7 +22,7 @@ from arm_planner.finger_clearance import (
     clear_closing_axis,
     hand_pointing_down,
 )
-from arm_planner.grasp_site import GraspTarget, Occupancy, find_grasp_site, ledge_heights, search_grasp_site
+from arm_planner.grasp_site import GraspTarget, Occupancy, find_grasp_site, search_grasp_site
 from arm_planner.tasks.base import (
     TaskReward,
     angle_down,
@@ -93,12 +93,6 @@ class GraspReward(TaskReward):
     # top-heavy target tips it over before the grip forms. Off with keep_fingers_off_target=False.
     keep_fingers_off_target: bool = True
     finger_depth_allowance_m: float = 0.004
-    # Where the target widens sharply just above the fingertips (the underside of a lamp's shade, a
-    # rim), the fingers, which begin to close up to max_close_distance_m above the site, land on its
-    # slope and ride up over it: the site comes down until the tips are this far below the ledge
-    # (not below 1.5 cm above the table, nor deeper than grasp_max_depth_m below the top).
-    clear_ledges: bool = False
-    ledge_clearance_m: float = 0.015
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
@@ -134,8 +128,6 @@ class GraspReward(TaskReward):
                 fits=lambda axis_xy: self._fits_between(axis_xy, self.fingers.gap_m),
             )
         known = self.fingers is not None and self.fingers.known and g.part_halfspaces and len(g.vertices_world)
-        if self.clear_ledges and known and not self.grasp_site_moved:
-            self._clear_ledge()
         if self.keep_fingers_off_target and known:
             voxel_m = 0.004
             lo, hi = g.vertices_world.min(axis=0) - voxel_m, g.vertices_world.max(axis=0) + voxel_m
@@ -150,19 +142,6 @@ class GraspReward(TaskReward):
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
-
-    def _clear_ledge(self) -> None:
-        """Lower the site below a ledge just above the fingertips (see clear_ledges)."""
-        g, tip_above = self.geometry, self.fingers.tcp_above_tip_m
-        lowest = max(g.table_height_m + 0.015, g.top_z - self.grasp_max_depth_m)
-        tip = self.grasp_point[2] - tip_above
-        floor = max(tip - 0.002, g.table_height_m + 0.02)
-        window = (floor, tip + self.ledge_clearance_m)
-        ledges = ledge_heights(self.grasp_point, self.closing_axis, self.fingers, g.part_halfspaces, window)
-        if len(ledges):
-            z = max(float(ledges.min()) - self.ledge_clearance_m + tip_above, lowest)
-            self.grasp_point = np.array([*self.grasp_point[:2], min(z, self.grasp_point[2])])
-            self.grasp_offset = self.grasp_point - g.com_world
 
     def finger_depth_penalty(self, hand_pos: np.ndarray, hand_rot: np.ndarray) -> np.ndarray:
         """[...] how much deeper than allowed the open fingers of hands [..., 3] / [..., 3, 3] stand
