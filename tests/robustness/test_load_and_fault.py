@@ -57,20 +57,18 @@ def test_latest_frame_processing_keeps_the_lag_bounded(run):
     assert 0 < published < received / 4, diagnostics
 
 
-def test_memory_growth_below_50_mb(run):
-    """A leak raises both what stays between frames (the lowest sample of the last third minus that
-    of the first) and the typical level (median of the last third minus the first); samples taken
-    mid-frame swing by 100 MB and more with the frame being reconstructed, and the allocator handing
-    memory back to the system between two frames lowers a single floor sample by as much (one
-    fresh-clone run: floor +58 MB, median +1.4 MB), so a node fails when both grew."""
+def test_no_node_leaks_memory_during_the_load_run(run):
+    """A leak grows what a node holds from frame to frame: from the first third of the run to the
+    middle one and again to the last (robustness.load.steady_growth_mb, each step the smaller of the
+    lowest and the median samples' change). Samples taken mid-frame swing by 100 MB with the frame
+    being reconstructed, and the first frames after the warm-up still fill caches once (one run on
+    another CPU: reconstruction_node +53 MB floor, +70 MB median over 20 s, flat after it), so
+    neither a single step nor a single sample counts. Slow leaks are the soak's to find
+    (bench_robustness --duration-s 600)."""
     memory = run["load"]["memory"]
-    growth = {
-        k: min(v["floor_growth_mb"], v["trend_growth_mb"])
-        for k, v in memory.items()
-        if v["floor_growth_mb"] is not None
-    }
-    assert len(growth) == len(memory), f"nodes without memory samples: {memory}"
-    assert all(g < 50.0 for g in growth.values()), f"growth (MB, the smaller of floor and median) {growth}, {memory}"
+    steady = {k: v["steady_growth_mb"] for k, v in memory.items()}
+    assert all(v is not None for v in steady.values()), f"nodes without memory samples: {memory}"
+    assert all(v < 25.0 for v in steady.values()), f"steady growth per third of the run (MB) {steady}, {memory}"
 
 
 def test_kill9_of_reconstruction_planner_keeps_meshes_and_pipeline_resumes(run):

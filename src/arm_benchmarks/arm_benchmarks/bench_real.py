@@ -185,6 +185,10 @@ def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng
         predicted = cv2.imread(str(folder / "labels.png"), cv2.IMREAD_UNCHANGED)
         metrics = segmentation_metrics(predicted, truth)
         row["metrics"] = {k: float(metrics[k]) for k in METRIC_KEYS} | {"n_gt": metrics["n_gt"]}
+        if not np.any((truth > 0) & (depth_m <= 0)):
+            # labels drawn only where the sensor returned depth (as OSD's): scored on those pixels too
+            on_depth = segmentation_metrics(np.where(depth_m > 0, predicted, 0), truth)
+            row["metrics_on_depth"] = {k: float(on_depth[k]) for k in METRIC_KEYS}
     row["noise"] = noise_stability(
         rgb, depth_m, camera.K, T_world_camera, row["instances"], processor, args.noise_copies, rng
     )
@@ -212,6 +216,7 @@ def aggregate(rows: list[dict]) -> dict:
     objects = [o for r in ok for o in r.get("objects", [])]
     noise = [r["noise"] for r in ok if "noise" in r and r["noise"]["copies"] > 0]
     labelled = [r["metrics"] for r in ok if "metrics" in r]
+    on_depth = [r["metrics_on_depth"] for r in ok if "metrics_on_depth" in r]
     times = [r["time_s"] for r in ok if r["time_s"] is not None]
     seg_times = [r["segmentation_s"] for r in ok if r["segmentation_s"] is not None]
     out = {
@@ -240,6 +245,8 @@ def aggregate(rows: list[dict]) -> dict:
         }
     if labelled:
         out["metrics"] = {k: mean([m[k] for m in labelled]) for k in METRIC_KEYS} | {"frames": len(labelled)}
+    if on_depth:
+        out["metrics_on_depth"] = {k: mean([m[k] for m in on_depth]) for k in METRIC_KEYS} | {"frames": len(on_depth)}
     return out
 
 
@@ -279,6 +286,13 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
             lines += [f"- failed: `{frame}`: {error}" for frame, error in s["failed_frames"].items()]
         if s["empty_frames"]:
             lines += [f"- no instance in `{frame}`: {reason}" for frame, reason in s["empty_frames"].items()]
+        if "metrics_on_depth" in s:
+            m = s["metrics_on_depth"]
+            lines.append(
+                "- the labels cover only pixels with depth; scored on those pixels: overlap F "
+                f"{_fmt(m['overlap_f'])}, boundary F {_fmt(m['boundary_f'])}, F@75 {_fmt(m['f_at_75'])}, "
+                f"background FP {_fmt(m['background_fp_fraction'])}"
+            )
         if "noise" in s:
             n = s["noise"]
             lines.append(

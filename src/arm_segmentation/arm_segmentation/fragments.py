@@ -4,8 +4,9 @@ On real depth a box's top face, a printed patch or a rim often comes out as a se
 few square centimetres large, and which ones do changes from frame to frame with the sensor's noise.
 An instance whose visible area is under min_instance_area_m2 and whose outline runs mostly
 (min_contact_share) along one larger instance at the same depth is part of it and joins it: a small
-object beside another touches it along a side, not all round. One that touches no instance at its
-depth is dropped when it is also under min_isolated_area_m2 (too small to reconstruct or grasp).
+object beside another touches it along a side, not all round. A speck under min_speck_area_m2 (too
+small to reconstruct or grasp: a corner of a face cut off by an edge) joins the larger instance it
+touches most at its depth, and is dropped when it touches none.
 Instances seen mostly without depth have no measured size and are left alone.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 class FragmentParams:
     min_instance_area_m2: float = 0.0015  # 15 cm^2, a 4 x 4 cm patch seen face-on
     min_contact_share: float = 0.6  # of the fragment's outline pixel pairs, along the instance it joins
-    min_isolated_area_m2: float = 0.0002  # 2 cm^2
+    min_speck_area_m2: float = 0.0002  # 2 cm^2
     contact_depth_m: float = 0.015  # neighbouring pixels of two instances this close in depth touch
     contact_reach_px: int = 2  # pixels up to this far apart along a row or a column are neighbours
 
@@ -76,9 +77,10 @@ def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, par
     owner = np.arange(n + 1)
     for i in np.flatnonzero(fragment):
         share = np.where(areas > areas[i], touching[i], 0) / max(outline[i], 1)
-        if share.max() >= params.min_contact_share:
+        speck = areas[i] < params.min_speck_area_m2
+        if share.max() >= params.min_contact_share or (speck and share.max() > 0):
             owner[i] = int(np.argmax(share))
-        elif not touching[i].any() and areas[i] < params.min_isolated_area_m2:
+        elif speck:
             owner[i] = 0
     for _ in range(n):  # follow chains (fragment -> larger fragment -> object) to their end
         following = owner[owner]

@@ -30,8 +30,8 @@ def test_visible_area_of_a_face_on_patch():
 def test_patch_joins_its_object_a_speck_goes_and_objects_stay():
     labels, depth = scene()
     areas = visible_areas_m2(labels, depth, K)
-    assert areas[2] < PARAMS.min_isolated_area_m2 and areas[4] < PARAMS.min_isolated_area_m2
-    assert PARAMS.min_isolated_area_m2 < areas[5] < PARAMS.min_instance_area_m2
+    assert areas[2] < PARAMS.min_speck_area_m2 and areas[4] < PARAMS.min_speck_area_m2
+    assert PARAMS.min_speck_area_m2 < areas[5] < PARAMS.min_instance_area_m2
     out = absorb_fragments(labels, depth, K, PARAMS)
     assert np.all(out[150:155, 150:155] == out[100, 100]) and out[100, 100] > 0, "patch absorbed by the box"
     assert np.all(out[400:403, 400:403] == 0), "lone speck dropped"

@@ -96,6 +96,20 @@ class GraphWatch:
             return self.meshes[-1] if self.meshes else None
 
 
+def steady_growth_mb(series: list[float]) -> float | None:
+    """Growth (MB) that a leak shows and a warm-up does not: the series is cut in thirds, each third
+    summarised by its lowest and its median sample, and the growth from one third to the next is the
+    smaller of the two changes; a leak grows from the first third to the second and again to the
+    last, a warm-up step or a one-off allocation in one of them only. The smaller of the two steps."""
+    if len(series) < 3:
+        return None
+    thirds = np.array_split(np.asarray(series, dtype=np.float64), 3)
+    floors = [float(t.min()) for t in thirds]
+    medians = [float(np.median(t)) for t in thirds]
+    steps = [min(floors[i + 1] - floors[i], medians[i + 1] - medians[i]) for i in range(2)]
+    return round(min(steps), 1)
+
+
 def run_load(
     probe,
     graph: dict[str, NodeProcess],
@@ -150,6 +164,7 @@ def run_load(
             # lowest of the last third minus lowest of the first third: what stays between frames (a
             # leak raises it; a frame's transient allocations, returned to the system, do not)
             "floor_growth_mb": round(float(min(series[-third:]) - min(series[:third])), 1) if series else None,
+            "steady_growth_mb": steady_growth_mb(series),
         }
     lag = {}
     for stage, values in watch.lags.items():
