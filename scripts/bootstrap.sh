@@ -20,11 +20,11 @@ if [ ! -x .venv/bin/python ]; then
   echo "[bootstrap] creating .venv"
   python3 -m venv .venv
 fi
-req_hash=$(sha256sum requirements.txt | cut -d' ' -f1)
+req_hash=$(cat requirements.txt requirements-dev.txt | sha256sum | cut -d' ' -f1)
 if [ "$(cat .venv/.requirements.sha 2>/dev/null)" != "$req_hash" ]; then
-  echo "[bootstrap] pip install -r requirements.txt"
+  echo "[bootstrap] pip install -r requirements.txt -r requirements-dev.txt"
   .venv/bin/python -m pip install -q --disable-pip-version-check "pip<25" "setuptools==79.0.1"
-  .venv/bin/python -m pip install -q --disable-pip-version-check -r requirements.txt
+  .venv/bin/python -m pip install -q --disable-pip-version-check -r requirements.txt -r requirements-dev.txt
   .venv/bin/python scripts/fix_cmake_paths.py .venv
   echo "$req_hash" > .venv/.requirements.sha
 fi

@@ -13,5 +13,11 @@ def test_bad_parameter_values_are_rejected_at_run_time(run):
     assert run["conventions"]["bad_values_accepted_at_run_time"] == []
 
 
+def test_parameters_read_at_start_up_refuse_a_change(run):
+    """Every parameter is read once: declared read-only, so `ros2 param set` is refused."""
+    c = run["conventions"]
+    assert c["writable"] == [] and c.get("set_refused", True), c
+
+
 def test_clean_shutdown_on_sigint(run):
     assert run["exit_code"] == 0, run["log"][-2000:]

@@ -9,7 +9,7 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -49,9 +49,10 @@ def latched_qos(depth: int = 1) -> QoSProfile:
 
 
 def declare(node, name: str, default, description: str, low=None, high=None, choices=None):
-    """Declare a parameter with a descriptor (and range) and return its value, validated. A parameter
-    with choices is also checked whenever it is set at run time (out-of-choice values are refused)."""
-    descriptor = ParameterDescriptor(description=description)
+    """Declare a parameter with a descriptor (and range) and return its value, validated. The nodes
+    read their parameters once, at start-up, so each is declared read-only: `ros2 param set` is
+    refused with "read-only" instead of reporting success and changing nothing."""
+    descriptor = ParameterDescriptor(description=description, read_only=True)
     if low is not None and isinstance(default, bool) is False:
         if isinstance(default, int):
             descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
@@ -61,7 +62,6 @@ def declare(node, name: str, default, description: str, low=None, high=None, cho
             ]
     if choices:
         descriptor.additional_constraints = "one of: " + ", ".join(choices)
-        _register_choices(node, name, list(choices))
     value = node.declare_parameter(name, default, descriptor).value
     if choices and value not in choices:
         raise ValueError(f"parameter '{name}'='{value}' is not one of {choices}")
@@ -83,22 +83,6 @@ def declare_cpu_niceness(node, default: int = PERCEPTION_NICENESS) -> int:
     if value > current:
         current = os.nice(value - current)
     return current
-
-
-def _register_choices(node, name: str, choices: list) -> None:
-    registry = getattr(node, "_arm_parameter_choices", None)
-    if registry is None:
-        registry = node._arm_parameter_choices = {}
-
-        def check(params):
-            for p in params:
-                allowed = registry.get(p.name)
-                if allowed and p.value not in allowed:
-                    return SetParametersResult(successful=False, reason=f"{p.name} must be one of {allowed}")
-            return SetParametersResult(successful=True)
-
-        node.add_on_set_parameters_callback(check)
-    registry[name] = choices
 
 
 class RateLimitedErrors:

@@ -82,6 +82,11 @@ def convention_report(probe, key: str) -> dict:
         keys = config_keys(NODES[key][2], node_name)
         report["in_config_not_declared"] = sorted(keys - set(own))
         report["declared_not_in_config"] = sorted(set(own) - keys)
+    report["writable"] = sorted(n for n, p in own.items() if not p["read_only"])
+    first = next(iter(sorted(own)), None)
+    if first is not None:  # a read-only parameter refuses a new value, even one of its own type
+        probe_value = {1: False, 2: 1, 3: 1.0, 4: "x"}.get(own[first]["type"], "x")
+        report["set_refused"] = not set_parameter(probe, node_name, first, probe_value)[0]
     accepted = []
     for name, p in own.items():
         if p["read_only"]:
