@@ -37,7 +37,7 @@ LOCAL_KEYS = ("python3-trimesh-pip", "python3-mujoco-pip", "python3-coacd-pip", 
 def imported_modules(package: pathlib.Path) -> set[str]:
     """Top-level modules imported by the package's code (its Python package and launch files, not its tests)."""
     modules = set()
-    files = [f for f in package.rglob("*.py") if "test" not in f.relative_to(package).parts[:1] and f.name != "setup.py"]
+    files = [f for f in package.rglob("*.py") if f.relative_to(package).parts[0] not in ("test", "setup.py")]
     for path in files:
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):

@@ -3,9 +3,9 @@
 import pytest
 from node_conventions import (  # noqa: F401  collected here
     test_bad_parameter_values_are_rejected_at_run_time,
-    test_parameters_read_at_start_up_refuse_a_change,
     test_clean_shutdown_on_sigint,
     test_parameters_are_declared_with_descriptors_and_ranges,
+    test_parameters_read_at_start_up_refuse_a_change,
 )
 from rclpy.qos import ReliabilityPolicy
 from robustness_nodes import run_against

@@ -8,14 +8,17 @@ and builds the SegmentedFrame and the overlay image to publish; segment_messages
 
 from collections.abc import Callable
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
+from arm_core.camera import backproject_image
 from arm_core.distortion import DistortionError, Undistorter, is_distorted
 from arm_core.frames import FrameInputError, RgbdFrame
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.colour import as_rgb8_msg
 from arm_ros.conversions import ConversionError
+from arm_ros.conversions.clouds import labelled_cloud_msg
 from arm_ros.conversions.frames import frame_from_camera_msgs, labels_from_msg, segmented_frame_msg
 from arm_ros.conversions.images import numpy_to_image
 from arm_segmentation.segmentation import SegmentationParams, segment_detailed
@@ -96,3 +99,11 @@ def segment_messages(
     """One synchronized frame -> (SegmentedFrame, overlay rgb8 Image); see segment_frame."""
     frame = decode_camera_frame(rgb_msg, depth_msg, info_msg, pose_msg)
     return segment_frame(frame, depth_msg, info_msg, pose_msg, labels_msg, params, exclude_fn)
+
+
+def object_cloud(frame: RgbdFrame, header) -> PointCloud2:
+    """PointCloud2 of the segmented frame's object pixels with depth: x, y, z in the camera's optical
+    frame (header's frame_id, metres), their colour and their instance label (arm_ros.conversions.clouds)."""
+    has = (frame.labels > 0) & (frame.depth_m > 0)
+    points = backproject_image(np.where(has, frame.depth_m, 0.0).astype(np.float32), frame.K)[has]
+    return labelled_cloud_msg(points, frame.rgb[has], frame.labels[has], header)

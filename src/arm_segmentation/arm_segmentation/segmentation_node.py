@@ -16,7 +16,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, Image, JointState, PointCloud2
 
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
@@ -25,7 +25,7 @@ from arm_ros.goal_activity import declare_goal_pause
 from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
-from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame
+from arm_segmentation.frame_processing import FrameError, decode_camera_frame, object_cloud, segment_frame
 from arm_segmentation.merge_model import MergeParams, shared_classifier
 from arm_segmentation.outline_model import OutlineParams, shared_outline_classifier
 from arm_segmentation.pose_tracking import CameraPoseTracker
@@ -155,6 +155,7 @@ class SegmentationNode(Node):
         self.pub_estimated_pose = self.create_publisher(PoseStamped, "camera/pose/estimated", 10)
         self.pub_frame = self.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
         self.pub_overlay = self.create_publisher(Image, "arm/segmentation/overlay", qos)
+        self.pub_cloud = self.create_publisher(PointCloud2, "arm/segmentation/points", qos)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.frames_published = 0
         self.frames_rejected = 0
@@ -252,6 +253,8 @@ class SegmentationNode(Node):
             return
         self.pub_frame.publish(frame)
         self.pub_overlay.publish(overlay)
+        if self.pub_cloud.get_subscription_count() > 0:  # built only for a listener (RViz, MoveIt's octomap)
+            self.pub_cloud.publish(object_cloud(decoded, depth.header))
         self.frames_published += 1
         self.last_latency_ms = 1e3 * (time.perf_counter() - start)
         self.last_instances = len(frame.instance_ids)

@@ -16,11 +16,12 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.action import ActionClient, ActionServer  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from seg_fixtures import Box, add_noise, look_at, render  # noqa: E402
-from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from arm_interfaces.action import Manipulate  # noqa: E402
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
+from arm_ros.conversions.clouds import labelled_cloud_to_numpy  # noqa: E402
 from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image  # noqa: E402
 from arm_ros.conversions.poses import matrix_to_pose  # noqa: E402
 from arm_ros.processes import NodeProcess, executable, node_built  # noqa: E402
@@ -168,9 +169,10 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
         tmp_path / "segmentation.log",
         params={"camera_pose_source": "estimate", "image_reliability": "reliable"},
     )
-    got = {"frames": [], "poses": [], "diag": []}
+    got = {"frames": [], "poses": [], "diag": [], "clouds": []}
     probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
     probe.create_subscription(PoseStamped, "camera/pose/estimated", got["poses"].append, 10)
+    probe.create_subscription(PointCloud2, "arm/segmentation/points", got["clouds"].append, 10)
     probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
     topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"), (CameraInfo, "camera/camera_info")]
     publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics]
@@ -200,7 +202,16 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
         assert frame.world_frame_id == "world" and pose.header.frame_id == "world"
         assert pose.header.stamp.sec == 2 and abs(pose.pose.position.z - CAMERA[2, 3]) < 0.005
         assert frame.camera_pose == pose.pose
-        assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
+        labels = image_to_numpy(frame.labels)
+        assert segmentation_metrics(labels, gt)["overlap_f"] > 0.9
+        # the objects' cloud: one point per object pixel with depth, in the optical frame, labelled
+        assert spin_until(probe, lambda: got["clouds"], 5.0)
+        cloud = got["clouds"][0]
+        points, colours, cloud_labels = labelled_cloud_to_numpy(cloud)
+        assert cloud.header.frame_id == frame.header.frame_id
+        assert 0.9 * np.count_nonzero(labels) < len(points) <= np.count_nonzero(labels)
+        assert set(np.unique(cloud_labels)) == set(frame.instance_ids)
+        assert np.all((points[:, 2] > 0.3) & (points[:, 2] < 1.0)) and colours.shape == (len(points), 3)
         assert spin_until(probe, lambda: pose_statuses() and pose_statuses()[-1].level == DiagnosticStatus.OK, 10.0)
         values = {kv.key: kv.value for kv in pose_statuses()[-1].values}
         assert float(values["inlier_fraction"]) > 0.5 and int(values["failures"]) >= 1  # resends count too
