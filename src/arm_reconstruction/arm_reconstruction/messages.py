@@ -12,7 +12,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from arm_interfaces.msg import GridMetadata, ReconstructedObjectArray
 from arm_interfaces.msg import ReconstructedObject as ReconstructedObjectMsg
 from arm_ros.conversions.meshes import object_msg, reconstructed_object_from_msg
-from arm_ros.conversions.poses import matrix_to_pose
+from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
 
 from .grid import GridFrame
 from .pipeline import ReconstructedObject
@@ -100,3 +100,17 @@ def markers_msg(objects: list[ReconstructedObject], header, alpha: float = 0.8) 
         marker.points = [Point(x=x, y=y, z=z) for x, y, z in corners.tolist()]
         markers.append(marker)
     return MarkerArray(markers=markers)
+
+
+def object_frame(object_id: int) -> str:
+    return f"object_{int(object_id)}"
+
+
+def object_transforms(objects: list[ReconstructedObject], header) -> list:
+    """TransformStamped of each reconstructed object's frame object_<id> (its mesh's frame: the world's
+    axes, origin at the mesh centroid) in the header's world frame."""
+    return [
+        matrix_to_transform_msg(o.T_world_object, header.frame_id, object_frame(o.id), header.stamp)
+        for o in objects
+        if o.ok
+    ]

@@ -16,6 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from arm_core.frames import FrameInputError
@@ -32,10 +33,11 @@ from arm_ros.common import (
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg
 from arm_ros.goal_activity import declare_goal_pause
+from arm_ros.tf import TfPublisher
 
 from .checkpoint import CheckpointError
 from .convex_parts import DecompositionSettings
-from .messages import main_table_height, markers_msg, objects_to_msg
+from .messages import main_table_height, markers_msg, object_transforms, objects_to_msg
 from .network import METHODS
 from .pipeline import STAGES, ReconstructionPreempted, ReconstructionSettings, Reconstructor
 
@@ -115,6 +117,7 @@ class ReconstructionNode(Node):
         self.pub_objects = self.create_publisher(ReconstructedObjectArray, "arm/meshes", latched_qos())
         self.pub_markers = self.create_publisher(MarkerArray, "arm/meshes/markers", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self.tf = TfPublisher(self)  # each object's frame object_<id>, for RViz and TF users
         self.create_subscription(SegmentedFrame, "arm/segmented_frame", self.on_frame, sensor_qos(reliability, 1))
 
         self.received = self.processed = self.dropped = self.rejected = 0
@@ -202,6 +205,9 @@ class ReconstructionNode(Node):
         if not self._publish(self.pub_objects, objects_to_msg(objects, header, table_height_m)):
             return
         self._publish(self.pub_markers, markers_msg(objects, header, self.marker_alpha))
+        transforms = object_transforms(objects, header)
+        if transforms:
+            self._publish(self.tf.dynamic, TFMessage(transforms=transforms))
         failed = [o for o in objects if not o.ok]
         for obj in failed:
             self.errors.error(f"object {obj.id}", f"object {obj.id} not reconstructed: {obj.error}")

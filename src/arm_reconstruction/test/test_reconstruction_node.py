@@ -31,6 +31,8 @@ from arm_reconstruction.reconstruction_node import ReconstructionNode
 from arm_ros.common import latched_qos
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg, segmented_frame_msg
+from arm_ros.conversions.poses import pose_to_matrix
+from arm_ros.tf import TfListener
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld
@@ -146,6 +148,7 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
     with node_and_client(ros_context, checkpoint, threshold=0.05) as (node, client, executor):
         diagnostics = []
         client.create_subscription(DiagnosticArray, "diagnostics", diagnostics.append, 10)
+        tf = TfListener(client)
         publisher = client.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
         assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10)
         bad = frame_msg(frame)
@@ -171,6 +174,10 @@ def test_node_publishes_latched_meshes_and_survives_bad_frames(sim, checkpoint, 
             assert len(obj.mesh.triangles) > 0 and 1 <= len(obj.convex_parts) <= 8 and obj.method == "arm"
             assert obj.grid.resolution == 16
         assert len(markers[0].markers) == 1 + len(ids)
+        # each object's frame on /tf: object_<id> in the world frame, at the mesh's pose
+        assert spin_until(executor, lambda: all(tf.lookup("world", f"object_{i}") is not None for i in ids), 10)
+        for obj in array.objects:
+            assert np.allclose(tf.lookup("world", f"object_{obj.id}"), pose_to_matrix(obj.pose), atol=1e-6)
         values = status_after_the_frame()
         assert {"grid_ms", "network_ms", "decomposition_ms", "frame_to_meshes_ms", "frames_dropped"} <= set(values)
         assert node.received == 2 and node.rejected == 1

@@ -4,8 +4,11 @@ publishes arm_interfaces/SegmentedFrame plus a colourised overlay for viewers.
 
 With camera_pose_source:=estimate there is no camera/pose input: T_world_camera is estimated from
 each frame's depth (arm_segmentation.pose_tracking: the last estimate is reused while its table
-plane still fits), published on camera/pose/estimated, and a frame without a usable support plane
-is skipped with the reason in the log and in /diagnostics.
+plane still fits), published on camera/pose/estimated and on /tf as the frame 'table' under the
+depth image's optical frame, and a frame without a usable support plane is skipped with the reason
+in the log and in /diagnostics. With camera_pose_source:=tf, T_world_camera is looked up on /tf and
+/tf_static from world_frame to the depth image's frame_id (the driver's optical frame); a frame
+without that transform is skipped, and says which frames /tf knows.
 
 While the planner serves a goal (pause_during_goals, as reconstruction_node) camera messages are
 dropped unprocessed: reconstruction holds frames back then anyway, and planning gets the CPU.
@@ -13,6 +16,7 @@ Set it false on both nodes for closed-loop re-planning from new meshes (plan_nod
 
 import time
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
@@ -20,8 +24,9 @@ from sensor_msgs.msg import CameraInfo, Image, JointState, PointCloud2
 
 from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
-from arm_ros.conversions.poses import matrix_to_pose
+from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
 from arm_ros.goal_activity import declare_goal_pause
+from arm_ros.tf import TfListener, TfPublisher
 from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
@@ -41,7 +46,7 @@ TOPICS = {
     "pose": (PoseStamped, "camera/pose"),
     "labels": (Image, "sim/ground_truth/labels"),
 }
-ESTIMATED_WORLD_FRAME = "world"
+ESTIMATED_WORLD_FRAME = "table"  # the estimate's frame: z up, table top z = 0, origin under the camera
 
 
 def stamp_s(msg) -> float:
@@ -61,8 +66,13 @@ class SegmentationNode(Node):
             self,
             "camera_pose_source",
             "topic",
-            "T_world_camera from camera/pose (topic) or estimated from the depth's table plane (estimate)",
-            choices=["topic", "estimate"],
+            "T_world_camera from camera/pose (topic), from /tf between world_frame and the depth image's "
+            "frame (tf), or estimated from the depth's table plane (estimate: published on /tf as the "
+            "frame 'table' under the camera)",
+            choices=["topic", "tf", "estimate"],
+        )
+        self.world_frame = declare(
+            self, "world_frame", "world", "With camera_pose_source tf: the gravity-aligned frame (z up) to plan in"
         )
         reliability = declare(
             self,
@@ -143,7 +153,9 @@ class SegmentationNode(Node):
             cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
         )
         self.tracker = CameraPoseTracker() if pose_source == "estimate" else None
-        self.inputs = ["rgb", "depth", "camera_info"] + ([] if self.tracker else ["pose"])
+        self.tf_listener = TfListener(self) if pose_source == "tf" else None
+        self.tf = TfPublisher(self)
+        self.inputs = ["rgb", "depth", "camera_info"] + (["pose"] if pose_source == "topic" else [])
         self.inputs += ["labels"] if self.use_ground_truth else []
         self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, queue)
         self.errors = RateLimitedErrors(self.get_logger())
@@ -234,6 +246,24 @@ class SegmentationNode(Node):
         pose = PoseStamped(pose=matrix_to_pose(estimate.T_world_camera))
         pose.header.stamp, pose.header.frame_id = depth.header.stamp, ESTIMATED_WORLD_FRAME
         self.pub_estimated_pose.publish(pose)
+        if depth.header.frame_id:  # the table under the camera's optical frame, which has its own parent
+            T_camera_table = np.linalg.inv(estimate.T_world_camera)
+            camera = depth.header.frame_id
+            self.tf.send([matrix_to_transform_msg(T_camera_table, camera, ESTIMATED_WORLD_FRAME, depth.header.stamp)])
+        return pose
+
+    def tf_pose(self, frame, depth) -> PoseStamped:
+        """T_world_camera from /tf for a decoded frame (world_frame <- the depth image's frame_id)."""
+        camera = depth.header.frame_id
+        T = self.tf_listener.lookup(self.world_frame, camera) if camera else None
+        if T is None:
+            known = ", ".join(sorted(self.tf_listener.frames())) or "none"
+            raise FrameError(
+                f"camera pose: no transform from '{camera}' to '{self.world_frame}' on /tf (frames: {known})"
+            )
+        frame.T_world_camera, frame.world_frame_id = T, self.world_frame
+        pose = PoseStamped(pose=matrix_to_pose(T))
+        pose.header.stamp, pose.header.frame_id = depth.header.stamp, self.world_frame
         return pose
 
     def process(self, rgb, depth, camera_info, pose=None, labels=None) -> None:
@@ -242,6 +272,8 @@ class SegmentationNode(Node):
             decoded = decode_camera_frame(rgb, depth, camera_info, pose)
             if self.tracker is not None:
                 pose = self.estimated_pose(decoded, depth)
+            elif self.tf_listener is not None:
+                pose = self.tf_pose(decoded, depth)
             # the robot base pose is given in the world frame of camera/pose, not an estimated one
             exclude_fn = self.arm_mask if self.self_filter and self.tracker is None else None
             frame, overlay = segment_frame(decoded, depth, camera_info, pose, labels, self.params, exclude_fn)

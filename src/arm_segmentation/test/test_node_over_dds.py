@@ -23,8 +23,9 @@ from arm_interfaces.action import Manipulate  # noqa: E402
 from arm_interfaces.msg import SegmentedFrame  # noqa: E402
 from arm_ros.conversions.clouds import labelled_cloud_to_numpy  # noqa: E402
 from arm_ros.conversions.images import camera_info_from_K, image_to_numpy, numpy_to_image  # noqa: E402
-from arm_ros.conversions.poses import matrix_to_pose  # noqa: E402
+from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg, pose_to_matrix  # noqa: E402
 from arm_ros.processes import NodeProcess, executable, node_built  # noqa: E402
+from arm_ros.tf import TfListener, TfPublisher  # noqa: E402
 from arm_segmentation.metrics import segmentation_metrics  # noqa: E402
 
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
@@ -173,6 +174,7 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
     probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
     probe.create_subscription(PoseStamped, "camera/pose/estimated", got["poses"].append, 10)
     probe.create_subscription(PointCloud2, "arm/segmentation/points", got["clouds"].append, 10)
+    tf = TfListener(probe)
     probe.create_subscription(DiagnosticArray, "diagnostics", got["diag"].append, 10)
     topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"), (CameraInfo, "camera/camera_info")]
     publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics]
@@ -199,7 +201,10 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
 
         assert deliver(frame_messages(2.0, rgb, depth, K)[:3], lambda: got["frames"] and got["poses"])
         frame, pose = got["frames"][0], got["poses"][0]
-        assert frame.world_frame_id == "world" and pose.header.frame_id == "world"
+        assert frame.world_frame_id == "table" and pose.header.frame_id == "table"
+        # the estimate on /tf: the table frame under the camera's optical frame
+        assert spin_until(probe, lambda: tf.lookup("table", "camera_color_optical_frame") is not None, 5.0)
+        assert np.allclose(tf.lookup("table", "camera_color_optical_frame"), pose_to_matrix(pose.pose), atol=1e-6)
         assert pose.header.stamp.sec == 2 and abs(pose.pose.position.z - CAMERA[2, 3]) < 0.005
         assert frame.camera_pose == pose.pose
         labels = image_to_numpy(frame.labels)
@@ -220,6 +225,47 @@ def test_node_estimates_the_camera_pose_without_a_pose_topic(probe, tmp_path):
     output = node.log()
     assert code == 0, output
     assert "camera pose: no plane" in output
+
+
+@pytest.mark.slow
+def test_node_takes_the_camera_pose_from_tf(probe, tmp_path):
+    """camera_pose_source tf: T_world_camera is the chain world -> base_link -> camera optical frame on
+    /tf_static and /tf, as a robot's URDF and a calibration publish it."""
+    rgb, depth, gt, K = render(
+        [Box((0.0, -0.05, 0.04), (0.04, 0.05, 0.04), 0.0, (200, 40, 40)), Box((0.12, 0.0, 0.06), (0.03, 0.03, 0.06))],
+        CAMERA,
+    )
+    node = NodeProcess(
+        "segmentation",
+        tmp_path / "segmentation.log",
+        params={"camera_pose_source": "tf", "world_frame": "world", "image_reliability": "reliable"},
+    )
+    got = {"frames": []}
+    probe.create_subscription(SegmentedFrame, "arm/segmented_frame", got["frames"].append, 10)
+    topics = [(Image, "camera/color/image_raw"), (Image, "camera/depth/image_raw"), (CameraInfo, "camera/camera_info")]
+    publishers = [probe.create_publisher(kind, topic, 10) for kind, topic in topics]
+    tf = TfPublisher(probe)
+    T_world_base = np.eye(4)
+    T_world_base[:3, 3] = (-0.55, 0.0, 0.0)
+    try:
+        assert spin_until(probe, lambda: all(p.get_subscription_count() > 0 for p in publishers), 30.0)
+        tf.send_static([matrix_to_transform_msg(T_world_base, "world", "base_link", Header().stamp)])
+        T_base_camera = np.linalg.inv(T_world_base) @ CAMERA
+        camera = matrix_to_transform_msg(T_base_camera, "base_link", "camera_color_optical_frame", Header().stamp)
+        for attempt in range(5):
+            tf.send([camera])
+            for p, m in zip(publishers, frame_messages(1.0 + attempt, rgb, depth, K)[:3], strict=True):
+                p.publish(m)
+            if spin_until(probe, lambda: got["frames"], 5.0):
+                break
+        assert got["frames"], node.log()[-2000:]
+        frame = got["frames"][0]
+        assert frame.world_frame_id == "world"
+        assert np.allclose(pose_to_matrix(frame.camera_pose), CAMERA, atol=1e-6)
+        assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
+    finally:
+        code = node.stop(timeout_s=10.0)
+    assert code == 0, node.log()
 
 
 @pytest.mark.slow

@@ -1,7 +1,7 @@
-"""geometry_msgs/Pose <-> 4x4 homogeneous transforms."""
+"""geometry_msgs/Pose and TransformStamped <-> 4x4 homogeneous transforms."""
 
 import numpy as np
-from geometry_msgs.msg import Pose
+from geometry_msgs.msg import Pose, TransformStamped
 
 from arm_ros.conversions import ConversionError
 
@@ -53,3 +53,26 @@ def matrix_to_pose(T: np.ndarray) -> Pose:
     q = matrix_to_quaternion(T[:3, :3])
     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(v) for v in q)
     return pose
+
+
+def matrix_to_transform_msg(T_parent_child: np.ndarray, parent: str, child: str, stamp) -> TransformStamped:
+    """4x4 T_parent_child -> geometry_msgs/TransformStamped (header.frame_id parent, child_frame_id child)."""
+    pose = matrix_to_pose(T_parent_child)
+    msg = TransformStamped(child_frame_id=child)
+    msg.header.frame_id, msg.header.stamp = parent, stamp
+    msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (
+        pose.position.x,
+        pose.position.y,
+        pose.position.z,
+    )
+    msg.transform.rotation = pose.orientation
+    return msg
+
+
+def transform_msg_to_matrix(msg: TransformStamped) -> np.ndarray:
+    """geometry_msgs/TransformStamped -> 4x4 T_parent_child. Raises ConversionError if non-finite."""
+    t, r = msg.transform.translation, msg.transform.rotation
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = t.x, t.y, t.z
+    pose.orientation = r
+    return pose_to_matrix(pose)
