@@ -1,6 +1,7 @@
 """The demo's manipulation request: one Manipulate goal for the most visible reachable reconstructed
-object (for a grasp or a rearrange, one the open gripper can span where there is one), judged in the
-simulator by how the true object moved."""
+object (for a grasp, one the open gripper can span; a rearrange prefers one), judged in the simulator
+by how the true object moved. Where no object suits the task, no goal is sent and the reason is
+reported."""
 
 import time
 
@@ -22,17 +23,28 @@ GRASP_SIDE_ROOM_M = 0.005
 
 
 def choose_target(objects, task: str):
-    """The most visible object within reach (of all objects if none is). A grasp or a rearrange
-    prefers objects whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on each side, fits
-    between the open fingers."""
+    """(target or None, why): the most visible object within REACH_M of the shoulder. A grasp needs
+    one whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on each side, fits between the open
+    fingers; a rearrange prefers one (a wider one is pushed). None, with the reason, when no object
+    suits the task."""
     shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
-    candidates = [o for o in objects if np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder) < REACH_M]
-    candidates = candidates or list(objects)
+    distance = {o.id: float(np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder)) for o in objects}
+    candidates = [o for o in objects if distance[o.id] < REACH_M]
+    if not candidates:
+        nearest = min(distance.values(), default=float("nan"))
+        return None, f"no reconstructed object within reach ({REACH_M} m from the shoulder; nearest {nearest:.2f} m)"
+    why = f"the most visible of {len(candidates)} object(s) within reach"
     if task in ("grasp", "rearrange"):
         gap = FINGER_GAP_OPEN_M - 2 * GRASP_SIDE_ROOM_M
         fitting = [o for o in candidates if narrowest_horizontal_width_m(msg_to_mesh(o.mesh)[0]) <= gap]
-        candidates = fitting or candidates
-    return max(candidates, key=lambda o: o.visible_fraction)
+        if fitting:
+            candidates, why = fitting, why + f" that fit(s) between the open fingers ({gap * 100:.1f} cm)"
+        elif task == "grasp":
+            return None, f"none of the {len(candidates)} object(s) within reach fits between the open fingers"
+        else:
+            why += "; none fits between the open fingers, so it is pushed"
+    target = max(candidates, key=lambda o: o.visible_fraction)
+    return target, f"object {target.id}: {why} (visible {target.visible_fraction:.0%})"
 
 
 def run_task(node, observer, meshes, truth, task: str) -> dict:
@@ -40,7 +52,10 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     client = ActionClient(node, Manipulate, "arm/manipulate")
     if not client.wait_for_server(timeout_sec=60.0):
         return {"error": "plan_node action server not available"}
-    target = choose_target(meshes.objects, task)
+    target, why = choose_target(meshes.objects, task)
+    print(f"[demo] {task} target: {why}", flush=True)
+    if target is None:
+        return {"task": task, "target_id": None, "why": why, "success_in_sim": None}
     goal = Manipulate.Goal(
         task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id, meshes_stamp=meshes.header.stamp
     )
@@ -85,6 +100,7 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     return {
         "task": task,
         "target_id": int(target.id),
+        "why": why,
         "truth_id": int(gt_id),
         "planned_success": bool(result.success),
         "message": result.message,
