@@ -2,7 +2,7 @@ SHELL := /bin/bash
 ENV := source scripts/env.sh
 ARGS ?=
 
-.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose bench-real clean
+.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose bench-real bench-demo clean
 
 setup:
 	@scripts/bootstrap.sh
@@ -37,6 +37,9 @@ bench-camera-pose: setup
 REAL ?= ../shared/real/osd_learn ../shared/real/osd_learn_uncropped ../shared/real/ycb_tables
 bench-real: setup
 	@$(ENV) && bench_real $(REAL) $(ARGS)
+
+bench-demo: setup
+	@$(ENV) && bench_demo $(ARGS)
 
 clean:
 	rm -rf build install log

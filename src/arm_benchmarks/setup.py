@@ -27,6 +27,7 @@ setup(
             "bench_robustness = arm_benchmarks.bench_robustness:main",
             "bench_camera_pose = arm_benchmarks.bench_camera_pose:main",
             "bench_real = arm_benchmarks.bench_real:main",
+            "bench_demo = arm_benchmarks.bench_demo:main",
             "bench_pushability = arm_benchmarks.pushability:main",
     ]},
 )
