@@ -179,7 +179,15 @@ class PlanNode(Node):
             10.0,
         )
         history = declare(self, "scene_history", 20, "/arm/meshes arrays kept for goals naming one by stamp", 1, 1000)
-        self.session = ManipulationSession(config, timestep)
+        base_xyz = declare(
+            self,
+            "robot_base_xyz_m",
+            [-0.55, 0.0, 0.0],
+            "World position of the robot base (as segmentation_node's); the twin stands it on the table at x, y",
+        )
+        if len(base_xyz) != 3 or not all(np.isfinite(v) for v in base_xyz):
+            raise ValueError(f"robot_base_xyz_m must be 3 finite values, got {list(base_xyz)}")
+        self.session = ManipulationSession(config, timestep, robot_base_world=(float(base_xyz[0]), float(base_xyz[1])))
         self.finger_joint = self.session.robot.trajectory_joint_names[-1]
         self.errors = RateLimitedErrors(self.get_logger())
 

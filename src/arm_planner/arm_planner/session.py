@@ -122,6 +122,7 @@ class ManipulationSession:
             self.robot,
             self.config.twin_overlap_exclude_m,
             self.config.object_friction,
+            self.robot_base_xy,
         )
         self.planner = Planner(self.twin.model, self.robot, self.config)
         self.twin_builds += 1

@@ -27,7 +27,7 @@ from arm_reconstruction.metrics import sample_surface_points
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
-from arm_sim.world import SLIDING_FRICTION, object_body_ids, object_body_name, world_spec
+from arm_sim.world import ROBOT_BASE_XY, SLIDING_FRICTION, object_body_ids, object_body_name, world_spec
 
 MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
@@ -182,6 +182,7 @@ class Twin:
         robot: RobotSpec | None = None,
         overlap_exclude_m: float = OVERLAP_EXCLUDE_M,
         friction: float = SLIDING_FRICTION,
+        robot_base_xy=ROBOT_BASE_XY,
     ):
         if not np.isfinite(table_height_m):
             raise TwinError("table height is not finite")
@@ -204,7 +205,8 @@ class Twin:
             model = ObjectModel(f"recon_{obj.id}", "reconstructed", mesh, parts)
             placed.append(PlacedObject(model, 1.0, T, (0.6, 0.6, 0.6, 1.0)))
             self.objects.append(obj)
-        self.scene = Scene(objects=placed, table_height_m=self.table_height_m, friction=float(friction))
+        base_xy = tuple(float(v) for v in robot_base_xy)
+        self.scene = Scene(placed, self.table_height_m, friction=float(friction), robot_base_xy=base_xy)
         try:
             spec = world_spec(self.scene, robot_arm=True, timestep_s=timestep_s, name="arm_twin")
             self.model = spec.compile()

@@ -121,3 +121,14 @@ def test_twin_uses_the_friction_it_is_given():
     assert twin.model.geom_friction[part, 0] == pytest.approx(0.4)
     with pytest.raises(TwinError, match="friction"):
         Twin([], 0.0, friction=-1.0)
+
+
+def test_the_robot_stands_where_the_base_parameter_puts_it_on_the_table():
+    twin = Twin([_box_object(1, (0.0, 0.0, 0.04))], 0.12, 0.01, robot_base_xy=(-0.4, 0.2))
+    data = mujoco.MjData(twin.model)
+    mujoco.mj_forward(twin.model, data)
+    assert np.allclose(data.xpos[twin.model.body("panda_link0").id], [-0.4, 0.2, 0.12])
+    default = Twin([_box_object(1, (0.0, 0.0, 0.04))], 0.0, 0.01)
+    data = mujoco.MjData(default.model)
+    mujoco.mj_forward(default.model, data)
+    assert np.allclose(data.xpos[default.model.body("panda_link0").id], [-0.55, 0.0, 0.0])

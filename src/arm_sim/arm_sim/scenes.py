@@ -12,7 +12,14 @@ from arm_core.camera import look_at
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS, SceneAppearance, sample_appearance
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import ObjectModel, ObjectPool
-from arm_sim.world import FLOOR_DROP_M, OBJECT_DENSITY_KG_M3, SLIDING_FRICTION, SimWorld, object_body_name
+from arm_sim.world import (
+    FLOOR_DROP_M,
+    OBJECT_DENSITY_KG_M3,
+    ROBOT_BASE_XY,
+    SLIDING_FRICTION,
+    SimWorld,
+    object_body_name,
+)
 
 DROP_REGION_X = (-0.2, 0.3)  # drop centres stay clear of the robot base at x = -0.55
 DROP_REGION_Y = (-0.3, 0.3)
@@ -46,6 +53,7 @@ class Scene:
     table_rgba: tuple = (0.55, 0.45, 0.35, 1.0)
     appearance: SceneAppearance | None = None  # None: the plain domain
     friction: float = SLIDING_FRICTION  # object-table and object-object sliding friction coefficient
+    robot_base_xy: tuple = ROBOT_BASE_XY  # world x, y of the robot base (it stands on the table), metres
 
     @property
     def table_centre(self) -> np.ndarray:
@@ -59,7 +67,10 @@ class Scene:
             if k
         ]
         appearance = None if self.appearance is None else self.appearance.subset(keep)
-        return Scene(objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance, self.friction)
+        return Scene(
+            objects, self.table_height_m, self.table_half_extent_m, self.table_rgba, appearance, self.friction,
+            self.robot_base_xy,
+        )  # fmt: skip
 
     def with_domain(self, domain: str, rng: np.random.Generator) -> "Scene":
         """This scene in a visual domain ("realistic": a look drawn from a child of rng, so the

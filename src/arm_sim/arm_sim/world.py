@@ -74,7 +74,8 @@ def world_spec(scene, robot_arm: bool = True, timestep_s: float = 0.002, name: s
     for i, placed in enumerate(scene.objects):
         _add_object(spec, i, placed, friction, None if appearance is None else appearance.objects[i])
     if robot_arm:
-        robot.add_panda(spec, [ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], table_z])
+        base_x, base_y = getattr(scene, "robot_base_xy", ROBOT_BASE_XY)
+        robot.add_panda(spec, [float(base_x), float(base_y), table_z])
     return spec
 
 
