@@ -17,14 +17,9 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
 from arm_bringup.camera_presets import load_preset, node_parameters, node_remappings
+from arm_ros.processes import NODES  # bringup key: (package, executable, parameter file), as `bringup` runs them
 
 CONFIG = os.path.join(get_package_share_directory("arm_bringup"), "config")
-NODES = {  # bringup key: (package, executable, parameter file)
-    "sim": ("arm_sim", "sim_node", "sim_node.yaml"),
-    "segmentation": ("arm_segmentation", "segmentation_node", "segmentation_node.yaml"),
-    "reconstruction": ("arm_reconstruction", "reconstruction_node", "reconstruction_node.yaml"),
-    "planner": ("arm_planner", "plan_node", "plan_node.yaml"),
-}
 
 
 def graph_nodes(context):
