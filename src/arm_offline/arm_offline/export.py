@@ -16,7 +16,7 @@ from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import object_body_name, world_spec
 
-MESH_FORMATS = ("ply", "obj", "stl")
+MESH_FORMATS = ("ply", "obj", "stl", "glb")  # ply, obj and glb carry the vertex colours
 MIN_PART_VOLUME_M3 = 1e-10  # MuJoCo's mesh compiler rejects flat hulls
 TABLE_MARGIN_M = 0.05
 DEFAULT_TABLE_HALF_EXTENT_M = (0.7, 0.5)

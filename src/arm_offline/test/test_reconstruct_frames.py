@@ -94,6 +94,8 @@ def test_frames_are_reconstructed_into_meshes_and_a_loadable_scene(frames_folder
         for obj in entry["objects"]:
             mesh = trimesh.load(out / obj["mesh"], force="mesh")
             assert mesh.is_watertight and mesh.volume > 0
+            # coloured from the camera image: not the exporter's default grey everywhere
+            assert mesh.visual.kind == "vertex" and len(np.unique(mesh.visual.vertex_colors[:, :3], axis=0)) > 1
             np.testing.assert_allclose(mesh.extents, obj["extents_m"], atol=1e-4)
             for part in obj["convex_parts"]:
                 part = trimesh.load(out / part, force="mesh")
@@ -114,11 +116,12 @@ def test_finished_frames_are_skipped_unless_overwrite(frames_folder, reconstruct
 
 def test_console_script_exit_status(frames_folder, tmp_path):
     folder, _ = frames_folder
-    command = ["reconstruct_frames", "--input", str(folder), "--output", str(tmp_path / "out"), "--mesh-format", "stl"]
+    command = ["reconstruct_frames", "--input", str(folder), "--output", str(tmp_path / "out"), "--mesh-format", "glb"]
     run = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "000002.png" in run.stderr and "000003.png: no depth image" in run.stderr
-    assert list((tmp_path / "out" / "000001").glob("object_*.stl"))
+    glb = sorted((tmp_path / "out" / "000001").glob("object_*.glb"))
+    assert glb and trimesh.load(glb[0], force="mesh").visual.kind == "vertex", "GLB keeps the vertex colours"
     with pytest.raises(SystemExit) as exit_info:
         main(["--input", str(tmp_path / "missing"), "--output", str(tmp_path / "o")])
     assert exit_info.value.code == 2

@@ -84,7 +84,8 @@ def object_colour(object_id: int, alpha: float = 0.8) -> ColorRGBA:
 
 
 def markers_msg(objects: list[ReconstructedObject], header, alpha: float = 0.8) -> MarkerArray:
-    """A DELETEALL marker followed by one TRIANGLE_LIST marker per reconstructed object (id = object id)."""
+    """A DELETEALL marker followed by one TRIANGLE_LIST marker per reconstructed object (id = object id),
+    coloured per vertex from the camera image where the object has vertex colours, else by its id."""
     clear = Marker(action=Marker.DELETEALL, ns=MARKER_NAMESPACE)
     clear.header = header
     markers = [clear]
@@ -96,8 +97,12 @@ def markers_msg(objects: list[ReconstructedObject], header, alpha: float = 0.8) 
         marker.pose = matrix_to_pose(obj.T_world_object)
         marker.scale.x = marker.scale.y = marker.scale.z = 1.0
         marker.color = object_colour(obj.id, alpha)
-        corners = np.asarray(obj.mesh.vertices, dtype=np.float64)[np.asarray(obj.mesh.faces).reshape(-1)]
+        corner_index = np.asarray(obj.mesh.faces).reshape(-1)
+        corners = np.asarray(obj.mesh.vertices, dtype=np.float64)[corner_index]
         marker.points = [Point(x=x, y=y, z=z) for x, y, z in corners.tolist()]
+        if obj.vertex_colours is not None and len(obj.vertex_colours) == len(obj.mesh.vertices):
+            rgb = obj.vertex_colours[corner_index].astype(np.float64) / 255.0  # the camera's colours
+            marker.colors = [ColorRGBA(r=r, g=g, b=b, a=float(alpha)) for r, g, b in rgb.tolist()]
         markers.append(marker)
     return MarkerArray(markers=markers)
 

@@ -17,8 +17,10 @@ import torch
 import trimesh
 
 from arm_core.camera import silhouette
+from arm_core.frames import validate_frame
 
 from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
+from .colour import vertex_colours
 from .convex_parts import ConvexDecomposer, DecompositionSettings
 from .grid import CHECKPOINT_DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
 from .meshing import (
@@ -90,13 +92,18 @@ class ReconstructedObject:
     error: str = ""
     probabilities: np.ndarray | None = field(default=None, repr=False)
     from_observed_voxels: bool = False  # the network predicted nothing: the mesh is of the observed voxels
+    vertex_colours: np.ndarray | None = field(default=None, repr=False)  # (V, 3) uint8 RGB of mesh.vertices
 
     @property
     def ok(self) -> bool:
         return not self.error and len(self.mesh.faces) > 0
 
     def world_mesh(self) -> trimesh.Trimesh:
-        return self.mesh.copy().apply_transform(self.T_world_object)
+        """The mesh in the world frame, with its vertex colours when it has them."""
+        mesh = self.mesh.copy().apply_transform(self.T_world_object)
+        if self.vertex_colours is not None and len(self.vertex_colours) == len(mesh.vertices):
+            mesh.visual.vertex_colors = np.column_stack([self.vertex_colours, np.full(len(mesh.vertices), 255)])
+        return mesh
 
     def world_convex_parts(self) -> list[trimesh.Trimesh]:
         return [p.copy().apply_transform(self.T_world_object) for p in self.convex_parts]
@@ -242,7 +249,16 @@ class Reconstructor:
         grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
         self._stop_if_asked()
         probabilities = self.predict(grids)
-        return self.build_objects(grids, probabilities, depth_m, labels, K, T_world_camera)
+        objects = self.build_objects(grids, probabilities, depth_m, labels, K, T_world_camera)
+        if rgb is not None:
+            frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb, labels=labels)
+            for obj in objects:
+                if obj.ok:
+                    vertices = obj.mesh.vertices @ obj.T_world_object[:3, :3].T + obj.T_world_object[:3, 3]
+                    obj.vertex_colours = vertex_colours(
+                        vertices, frame.rgb, frame.depth_m, frame.labels, obj.id, frame.K, frame.T_world_camera
+                    )
+        return objects
 
     def grids(self, depth_m, K, T_world_camera, labels, object_ids=None) -> FrameGrids:
         s = self.settings

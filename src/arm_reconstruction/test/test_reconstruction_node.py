@@ -85,9 +85,12 @@ def test_messages_round_trip(sim, checkpoint):
     assert len(back.convex_parts) == len(ok[0].convex_parts) and back.grid == ok[0].grid
     array = objects_to_msg(objects, Header(frame_id="world"), 0.0)
     assert [o.id for o in array.objects] == [o.id for o in ok]
+    ok[0].vertex_colours = np.tile(np.array([200, 100, 0], np.uint8), (len(ok[0].mesh.vertices), 1))
     markers = markers_msg(objects, Header(frame_id="world"))
     assert markers.markers[0].action == Marker.DELETEALL and len(markers.markers) == 1 + len(ok)
-    assert len(markers.markers[1].points) == 3 * len(ok[0].mesh.faces)
+    first = next(m for m in markers.markers if m.id == ok[0].id)
+    assert len(first.points) == len(first.colors) == 3 * len(ok[0].mesh.faces)  # coloured per vertex
+    assert first.colors[0].r == pytest.approx(200 / 255) and first.colors[0].a == pytest.approx(0.8)
 
 
 def test_malformed_frames_raise_conversion_errors(sim):
