@@ -2,7 +2,8 @@
 
 The MJCF comes from arm_sim's world builder (the same code path as the simulator and the planner's
 twin): the table box, the floor and one free body per object with its convex parts as collision
-geoms; no robot. The builder centres the table at the world origin, so the table box is made large
+geoms; no robot. As in the twin, two objects whose convex parts overlap as built do not collide.
+The builder centres the table at the world origin, so the table box is made large
 enough to cover the support plane's footprint and the objects.
 """
 
@@ -14,7 +15,7 @@ import trimesh
 from arm_reconstruction.pipeline import ReconstructedObject
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
-from arm_sim.world import object_body_name, world_spec
+from arm_sim.world import compile_without_overlap_contacts, object_body_name, world_spec
 
 MESH_FORMATS = ("ply", "obj", "stl", "glb")  # ply, obj and glb carry the vertex colours
 MIN_PART_VOLUME_M3 = 1e-10  # MuJoCo's mesh compiler rejects flat hulls
@@ -80,8 +81,8 @@ def scene_mjcf(
     table_rgba = mean_colour(rgb, table_mask)
     scene = Scene(placed, float(table_height_m), table_half_extent_m(simulated, support_xy), table_rgba)
     spec = world_spec(scene, robot_arm=False, name=f"reconstruction_{name}")
-    try:
-        spec.compile()
+    try:  # as in the planner's twin: objects overlapping as built do not collide with each other
+        compile_without_overlap_contacts(spec, len(placed))
     except ValueError as error:  # MuJoCo's compiler reports through ValueError
         raise SceneError(f"the MJCF scene does not compile: {error}") from error
     return spec.to_xml(), bodies

@@ -33,8 +33,7 @@ from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANG
 from arm_planner.tasks.base import RewardWeights, TargetGeometry
 from arm_planner.tasks.grasp import GRASP_STATES, GraspReward
 from arm_planner.tasks.push import PUSH_STATES, CagePushReward, PushReward
-from arm_planner.twin import OVERLAP_EXCLUDE_M
-from arm_sim.world import SLIDING_FRICTION
+from arm_sim.world import OVERLAP_EXCLUDE_M, SLIDING_FRICTION
 
 DEFAULT_TOLERANCE_M = 0.025
 DEFAULT_TASK_STEPS = {"rearrange": 500, "push": 750}

@@ -27,7 +27,14 @@ from arm_reconstruction.metrics import sample_surface_points
 from arm_sim import robot as sim_robot
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
-from arm_sim.world import ROBOT_BASE_XY, SLIDING_FRICTION, object_body_ids, object_body_name, world_spec
+from arm_sim.world import (
+    OVERLAP_EXCLUDE_M,
+    ROBOT_BASE_XY,
+    SLIDING_FRICTION,
+    compile_without_overlap_contacts,
+    object_body_name,
+    world_spec,
+)
 
 MIN_PART_VOLUME_M3 = 1e-10
 MIN_EXTENT_M = 0.0005
@@ -37,7 +44,6 @@ MAX_GEOMETRY_VERTICES = 400
 # between its vertices (a box's faces carry none).
 TARGET_SURFACE_SAMPLES = 800
 # Objects overlapping deeper than this as built (m) do not collide with each other in the twin.
-OVERLAP_EXCLUDE_M = 0.002
 
 
 def stabilize_servos(model: mujoco.MjModel, max_step_frequency: float = 0.5) -> None:
@@ -60,23 +66,6 @@ def stabilize_servos(model: mujoco.MjModel, max_step_frequency: float = 0.5) -> 
         if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
             d1, d2 = model.jnt_dofadr[model.eq_obj1id[e]], model.jnt_dofadr[model.eq_obj2id[e]]
             model.dof_armature[[d1, d2]] = model.dof_armature[[d1, d2]].max()
-
-
-def overlapping_object_pairs(model: mujoco.MjModel, n_objects: int, depth_m: float) -> list[tuple[int, int]]:
-    """(i, j), i < j: object bodies (arm_sim.world's object_i) that interpenetrate deeper than depth_m
-    at the model's initial poses."""
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    contacts = data.contact[: data.ncon]
-    if data.ncon == 0 or n_objects < 2:
-        return []
-    index = np.full(model.nbody, -1)
-    index[object_body_ids(model, n_objects)] = np.arange(n_objects)
-    a = index[model.body_rootid[model.geom_bodyid[contacts.geom1]]]
-    b = index[model.body_rootid[model.geom_bodyid[contacts.geom2]]]
-    deep = (a >= 0) & (b >= 0) & (a != b) & (contacts.dist < -depth_m)
-    pairs = np.unique(np.sort(np.stack([a[deep], b[deep]], axis=1), axis=1), axis=0)
-    return [(int(i), int(j)) for i, j in pairs]
 
 
 class TwinError(RuntimeError):
@@ -209,12 +198,7 @@ class Twin:
         self.scene = Scene(placed, self.table_height_m, friction=float(friction), robot_base_xy=base_xy)
         try:
             spec = world_spec(self.scene, robot_arm=True, timestep_s=timestep_s, name="arm_twin")
-            self.model = spec.compile()
-            self.overlapping = overlapping_object_pairs(self.model, len(placed), overlap_exclude_m)
-            for i, j in self.overlapping:
-                spec.add_exclude(bodyname1=object_body_name(i), bodyname2=object_body_name(j))
-            if self.overlapping:
-                self.model = spec.compile()
+            self.model, self.overlapping = compile_without_overlap_contacts(spec, len(placed), overlap_exclude_m)
         except Exception as exc:  # mujoco raises ValueError with the compiler's message
             raise TwinError(f"twin failed to compile: {exc}") from exc
         stabilize_servos(self.model)

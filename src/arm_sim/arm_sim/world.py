@@ -22,6 +22,9 @@ OBJECT_DENSITY_KG_M3 = 600.0
 SLIDING_FRICTION = 0.9
 TORSIONAL_FRICTION_M, ROLLING_FRICTION_M = 0.01, 0.001
 FLOOR_DROP_M = 0.75
+# Objects that interpenetrate deeper than this as built (the convex parts of reconstructed objects that
+# touch overlap) get no contact with each other: the solver would push them apart and topple them.
+OVERLAP_EXCLUDE_M = 0.002
 
 
 def object_body_name(i: int) -> str:
@@ -164,6 +167,36 @@ def _add_object(spec: mujoco.MjSpec, i: int, placed, friction: list[float], look
             friction=friction,
             condim=4,
         )
+
+
+def overlapping_object_pairs(model: mujoco.MjModel, n_objects: int, depth_m: float) -> list[tuple[int, int]]:
+    """(i, j), i < j: object bodies (arm_sim.world's object_i) that interpenetrate deeper than depth_m
+    at the model's initial poses."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    contacts = data.contact[: data.ncon]
+    if data.ncon == 0 or n_objects < 2:
+        return []
+    index = np.full(model.nbody, -1)
+    index[object_body_ids(model, n_objects)] = np.arange(n_objects)
+    a = index[model.body_rootid[model.geom_bodyid[contacts.geom1]]]
+    b = index[model.body_rootid[model.geom_bodyid[contacts.geom2]]]
+    deep = (a >= 0) & (b >= 0) & (a != b) & (contacts.dist < -depth_m)
+    pairs = np.unique(np.sort(np.stack([a[deep], b[deep]], axis=1), axis=1), axis=0)
+    return [(int(i), int(j)) for i, j in pairs]
+
+
+def compile_without_overlap_contacts(
+    spec: mujoco.MjSpec, n_objects: int, depth_m: float = OVERLAP_EXCLUDE_M
+) -> tuple[mujoco.MjModel, list[tuple[int, int]]]:
+    """(model, pairs): the spec compiled with a contact exclusion (kept in the spec, so in its MJCF too)
+    between every two objects that interpenetrate deeper than depth_m as built. Raises ValueError when
+    MuJoCo's compiler does."""
+    model = spec.compile()
+    pairs = overlapping_object_pairs(model, n_objects, depth_m)
+    for i, j in pairs:
+        spec.add_exclude(bodyname1=object_body_name(i), bodyname2=object_body_name(j))
+    return (spec.compile() if pairs else model), pairs
 
 
 def object_body_ids(model: mujoco.MjModel, n_objects: int) -> np.ndarray:

@@ -122,3 +122,31 @@ def test_scene_friction_decides_whether_a_pushed_box_slides():
     assert moved[0.5] > 0.05 and abs(moved[0.9]) < 0.005
     with pytest.raises(ValueError, match="friction"):
         build_world(Scene(friction=0.0), robot_arm=False)
+
+
+def test_objects_overlapping_as_built_get_no_contact_and_stay_put():
+    """Two boxes whose parts overlap by 4 cm as built (reconstructed neighbours' convex parts do):
+    without the exclusion MuJoCo pushes them 2 cm apart within 1 s; with it (in the spec, so in its
+    MJCF too) they rest where they were built. A box 3 cm off the others keeps its contacts."""
+    from arm_sim.scenes import PlacedObject, Scene
+    from arm_sim.world import compile_without_overlap_contacts, world_spec
+
+    box = trimesh.creation.box(extents=(0.06, 0.06, 0.06))
+    poses = []
+    for x in (0.0, 0.02, 0.11):  # the first two overlap by 4 cm, the third stands 3 cm off
+        T = np.eye(4)
+        T[:3, 3] = (x, 0.0, 0.03)
+        poses.append(T)
+    scene = Scene([PlacedObject(ObjectModel(f"b{i}", "box", box, [box]), 1.0, T) for i, T in enumerate(poses)])
+    spec = world_spec(scene, robot_arm=False)
+    model, pairs = compile_without_overlap_contacts(spec, 3)
+    assert pairs == [(0, 1)] and "exclude" in spec.to_xml()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    start = data.xpos.copy()
+    mujoco.mj_step(model, data, nstep=500)
+    assert np.abs(data.xpos - start).max() < 0.005
+    pushed = build_world(scene, robot_arm=False)
+    data = mujoco.MjData(pushed)
+    mujoco.mj_step(pushed, data, nstep=500)
+    assert np.abs(data.xpos - start).max() > 0.015, "without the exclusion they are pushed apart"
