@@ -77,3 +77,11 @@ def _is_ros_package(name: str) -> bool:
         or name.endswith(("_msgs", "_srvs", "_interfaces"))
         or name in {"rclpy", "launch", "launch_ros", "ament_index_python", "rosidl_runtime_py"}
     )
+
+
+LAB_PACKAGES = {"arm_benchmarks"}  # benchmarks, their execution and tracking, run keys and statistics
+
+
+@pytest.mark.parametrize("package", [p for p in PACKAGES if p.name not in LAB_PACKAGES], ids=lambda p: p.name)
+def test_no_product_package_imports_the_lab(package):
+    assert not imported_modules(package) & LAB_PACKAGES, f"{package.name} imports {imported_modules(package) & LAB_PACKAGES}"

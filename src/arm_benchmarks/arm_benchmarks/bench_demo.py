@@ -16,8 +16,8 @@ import time
 
 from tqdm import tqdm
 
+from arm_benchmarks.stats import wilson_interval
 from arm_core.atomic_io import atomic_write_json, atomic_write_text
-from arm_core.stats import wilson_interval
 
 
 def parse_seeds(text: str) -> list[int]:

@@ -6,12 +6,12 @@ instance labels (as in the paper). Every method reconstructs the scene from that
 uses the true meshes), the planner plans the task in a twin of that reconstruction, and the plan is
 executed in the ground-truth world: closed loop by default (every --observe-period seconds the twin
 takes the world's joint states and tracked object poses, or with --tracker depth the poses of its
-meshes fitted to a new depth frame; see arm_planner.world_execution), or open loop as in the paper
+meshes fitted to a new depth frame; see arm_benchmarks.world_execution), or open loop as in the paper
 with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
-carries the run key (arm_core.run_key: a digest of the settings, the methods' checkpoints and the source
+carries the run key (arm_benchmarks.run_key: a digest of the settings, the methods' checkpoints and the source
 of the packages that produce the result); rows with another key are moved to episodes.stale.jsonl, never
 reused.
 """
@@ -30,17 +30,17 @@ import torch
 from tqdm import tqdm
 
 from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, write_report
+from arm_benchmarks.depth_tracking import DepthTracker
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
-from arm_core.run_key import run_key
-from arm_core.stats import json_safe, median
-from arm_planner.depth_tracking import DepthTracker
+from arm_benchmarks.run_key import run_key
+from arm_benchmarks.stats import json_safe, median
+from arm_benchmarks.world_execution import Reobservation, run_in_world
 from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.tasks.grasp import GraspReward
 from arm_planner.twin import TwinObject
-from arm_planner.world_execution import Reobservation, run_in_world
 from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.network import METHODS
 from arm_reconstruction.pipeline import reconstruct
@@ -156,7 +156,7 @@ def target_stability_m(session: ManipulationSession, target_id: int, objects, ta
 
 def reobservation(tracker: str, objects: list[TwinObject], frame, seed: int) -> Reobservation | None:
     """None for the perfect tracker; for "depth", new frames through the view's camera, the objects'
-    poses fitted to them with the method's own meshes (arm_planner.depth_tracking)."""
+    poses fitted to them with the method's own meshes (arm_benchmarks.depth_tracking)."""
     if tracker == "perfect":
         return None
     tracker = DepthTracker({o.id: o.mesh for o in objects}, seed=seed)

@@ -40,8 +40,8 @@ from arm_benchmarks.real.scene_physics import (
     settle_scene,
     side_view_pose,
 )
+from arm_benchmarks.stats import json_safe, mean, median, percentile
 from arm_core.atomic_io import atomic_write, atomic_write_json
-from arm_core.stats import json_safe, mean, median, percentile
 from arm_offline.inputs import POSES_FILE, find_frames, find_intrinsics, load_camera, load_frame, load_poses
 from arm_offline.reconstruct_frames import SCENE_FILE, FrameReconstructor, OfflineSettings, camera_pose
 from arm_reconstruction.pipeline import Reconstructor

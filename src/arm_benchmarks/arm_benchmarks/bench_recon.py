@@ -17,7 +17,7 @@ moved less than --stable-threshold-m. The true meshes go through the same path a
 (decomposed by the pipeline's decomposer, placed at their centroids). An object a method left empty
 counts in its IoU as 0 and as not stable, and is left out of its Chamfer mean (counted as empty).
 
-Per-scene results are cached under OUT/cache/<run key>/ (arm_core.run_key: settings, checkpoints and
+Per-scene results are cached under OUT/cache/<run key>/ (arm_benchmarks.run_key: settings, checkpoints and
 the source of every package a result depends on), so an interrupted run resumes. Writes
 OUT/summary.json, OUT/report.md, OUT/chamfer_by_visibility.png, OUT/stability.png and
 OUT/qualitative.png.

@@ -11,7 +11,7 @@ objects), and timed per frame.
 Rendered frames and per-scene scores are kept under OUT/cache/, so an interrupted run resumes where
 it stopped. Frames are keyed by the run key of the settings and the simulator's source, scores by the
 run key of the settings, the boundary network's and merge classifier's weights and the source of the simulator, the
-segmentation and this package, so changed code or weights render and score anew (arm_core.run_key).
+segmentation and this package, so changed code or weights render and score anew (arm_benchmarks.run_key).
 Writes OUT/summary.json, OUT/report.md, OUT/examples.png and OUT/metrics.png.
 """
 
@@ -28,9 +28,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from tqdm import tqdm
 
+from arm_benchmarks.run_key import run_key
+from arm_benchmarks.stats import mean, median, percentile
 from arm_core.atomic_io import atomic_write
-from arm_core.run_key import run_key
-from arm_core.stats import mean, median, percentile
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.boundary_net import DEFAULT_CHECKPOINT, BoundaryParams
 from arm_segmentation.merge_model import DEFAULT_CHECKPOINT as MERGE_CHECKPOINT

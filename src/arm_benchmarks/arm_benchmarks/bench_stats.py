@@ -1,4 +1,4 @@
-"""Success rates with 90% Wilson intervals (arm_core.stats), plots and the report of bench_manip."""
+"""Success rates with 90% Wilson intervals (arm_benchmarks.stats), plots and the report of bench_manip."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from arm_benchmarks.methods import GROUND_TRUTH
-from arm_core.stats import median, rate, wilson_interval
+from arm_benchmarks.stats import median, rate, wilson_interval
 
 matplotlib.use("Agg")
 

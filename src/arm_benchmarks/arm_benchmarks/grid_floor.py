@@ -20,8 +20,8 @@ from tqdm import tqdm
 
 from arm_benchmarks.recon.config import BenchConfig
 from arm_benchmarks.recon.scenes import evaluated_ids, render_scene
+from arm_benchmarks.stats import median
 from arm_core.atomic_io import atomic_write_json
-from arm_core.stats import median
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
 from arm_reconstruction.meshing import occupancy_mesh
 from arm_reconstruction.metrics import chamfer_distance_m, normal_consistency

@@ -15,7 +15,7 @@ import json
 import pathlib
 
 from arm_benchmarks.bench_stats import BINS, summarise, write_plots, write_report
-from arm_core.stats import json_safe
+from arm_benchmarks.stats import json_safe
 
 # Settings that define the design: runs pooled together must agree on them (observe_period_s: closed
 # loop every so many seconds, 0 = open loop).

@@ -20,7 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_benchmarks.bench_manip import GOALS, ground_truth_objects
-from arm_core.stats import median, percentile
+from arm_benchmarks.stats import median, percentile
 from arm_planner.mppi import STATE_SPEC, BatchedRollout, MppiConfig, free_body_trees, set_sleep
 from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession

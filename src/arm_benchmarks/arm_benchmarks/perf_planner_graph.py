@@ -22,7 +22,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action import ActionClient
 
-from arm_core.stats import median
+from arm_benchmarks.stats import median
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_ros.common import latched_qos

@@ -22,8 +22,8 @@ import torch
 from std_msgs.msg import Header
 from tqdm import tqdm
 
+from arm_benchmarks.stats import median
 from arm_core.camera import look_at
-from arm_core.stats import median
 from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings, decomposition_iou
 from arm_reconstruction.grid import frame_grids, voxelize_mesh

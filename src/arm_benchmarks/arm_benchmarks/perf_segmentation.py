@@ -6,7 +6,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from arm_core.stats import median
+from arm_benchmarks.stats import median
 from arm_segmentation.baseline import segment_baseline
 from arm_segmentation.segmentation import segment
 from arm_sim.objects import object_pool

@@ -7,7 +7,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from arm_core.stats import mean
+from arm_benchmarks.stats import mean
 from arm_sim.appearance import DOMAINS
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene, task_camera_pose

@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from arm_benchmarks.bench_manip import GOALS
 from arm_benchmarks.methods import GROUND_TRUTH
-from arm_core.stats import json_safe, median, wilson_interval
+from arm_benchmarks.stats import json_safe, median, wilson_interval
 from arm_planner.planner import PlannerConfig
 from arm_planner.tasks import TASK_PUSH
 from arm_sim.objects import object_pool

@@ -1,8 +1,8 @@
-"""The benchmarks' caches are keyed by arm_core.run_key over the packages their results depend on."""
+"""The benchmarks' caches are keyed by arm_benchmarks.run_key over the packages their results depend on."""
 
 from arm_benchmarks import bench_manip, bench_seg
 from arm_benchmarks.recon.config import RESULT_PACKAGES, BenchConfig
-from arm_core.run_key import package_sources
+from arm_benchmarks.run_key import package_sources
 
 
 def test_bench_seg_keys_frames_by_the_simulator_and_scores_by_the_segmentation_too():

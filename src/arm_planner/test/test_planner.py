@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 from gantry import GANTRY_SPEC, gantry_model
-from perturbed_runs import holds_in_most
 
+from arm_benchmarks.perturbed_runs import holds_in_most
 from arm_planner.mppi import MppiConfig, get_state
 from arm_planner.planner import Planner, PlannerConfig, PlanRequest
 from arm_planner.tasks.base import TargetGeometry
@@ -127,4 +127,26 @@ def test_an_object_at_rest_away_from_where_planning_began_starts_its_rollouts_as
     assert not asleep_through_rollout()  # away from qpos0, it would start each rollout awake
     planner._sleeping_poses_as_rest(data)
     assert asleep_through_rollout()
+    planner.close()
+
+
+def test_planner_continues_from_an_observed_state():
+    """The object is found 3 cm off where the twin had it, 10 steps in: the plan goes on from there."""
+    planner, state, geometry = _setup()
+    body = planner.model.body("object_0")
+    adr = planner.model.jnt_qposadr[body.jntadr[0]]
+    calls, seen_x = [], []
+
+    def observe(step, control, model, data):
+        calls.append(step)
+        seen_x.append(float(data.xipos[body.id][0]))
+        if step != 10:
+            return False
+        data.qpos[adr] += 0.03
+        return True
+
+    result = planner.plan(state, PlanRequest("grasp", "object_0"), geometry, observe=observe)
+    assert calls == list(range(len(result.times_s)))
+    assert abs(seen_x[11] - (geometry.com_world[0] + 0.03)) < 0.002, "the next step starts from the observation"
+    assert result.success, result.message
     planner.close()

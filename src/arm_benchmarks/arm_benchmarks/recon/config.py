@@ -6,7 +6,7 @@ import dataclasses
 import pathlib
 
 from arm_benchmarks.methods import GROUND_TRUTH
-from arm_core.run_key import run_key
+from arm_benchmarks.run_key import run_key
 from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS, DEFAULT_STABLE_BASE_TILT_DEG, DEFAULT_THRESHOLD
 from arm_reconstruction.metrics import DEFAULT_CHAMFER_SAMPLES, DEFAULT_IOU_RESOLUTION
 from arm_sim.appearance import DEFAULT_DOMAIN

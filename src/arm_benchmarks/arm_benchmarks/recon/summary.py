@@ -19,7 +19,7 @@ from arm_benchmarks.recon.config import (
     VISIBILITY_BINS,
     BenchConfig,
 )
-from arm_core.stats import bootstrap_interval, mean, median, none_if_nan, rate, wilson_interval
+from arm_benchmarks.stats import bootstrap_interval, mean, median, none_if_nan, rate, wilson_interval
 
 
 def bin_label(bounds) -> str:

@@ -5,18 +5,17 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 import trimesh
-from perturbed_runs import holds_in_most, perturbed_scene
-from test_planner import _setup
 
 from arm_benchmarks.bench_manip import ground_truth_objects
+from arm_benchmarks.depth_tracking import DepthTracker
+from arm_benchmarks.perturbed_runs import holds_in_most, perturbed_scene
+from arm_benchmarks.world_execution import Reobservation, run_in_world, tracked_pose
 from arm_core.camera import look_at
-from arm_planner.depth_tracking import DepthTracker
 from arm_planner.mppi import MppiConfig
-from arm_planner.planner import PlannerConfig, PlanRequest
+from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks.push import CagePushReward, PushReward
 from arm_planner.twin import decompose
-from arm_planner.world_execution import Reobservation, run_in_world, tracked_pose
 from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import SimWorld
@@ -37,28 +36,6 @@ def test_tracked_pose_moves_the_methods_mesh_by_the_true_motion():
     moved = tracked_pose(view, motion @ view, method)
     assert np.allclose(moved, motion @ method)
     assert np.isclose(np.linalg.norm(moved[:3, 3] - motion[:3, 3]), np.linalg.norm(method[:3, 3])), "rigid"
-
-
-def test_planner_continues_from_an_observed_state():
-    """The object is found 3 cm off where the twin had it, 10 steps in: the plan goes on from there."""
-    planner, state, geometry = _setup()
-    body = planner.model.body("object_0")
-    adr = planner.model.jnt_qposadr[body.jntadr[0]]
-    calls, seen_x = [], []
-
-    def observe(step, control, model, data):
-        calls.append(step)
-        seen_x.append(float(data.xipos[body.id][0]))
-        if step != 10:
-            return False
-        data.qpos[adr] += 0.03
-        return True
-
-    result = planner.plan(state, PlanRequest("grasp", "object_0"), geometry, observe=observe)
-    assert calls == list(range(len(result.times_s)))
-    assert abs(seen_x[11] - (geometry.com_world[0] + 0.03)) < 0.002, "the next step starts from the observation"
-    assert result.success, result.message
-    planner.close()
 
 
 def _config(run: int, **fields) -> PlannerConfig:

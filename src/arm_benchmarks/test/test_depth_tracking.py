@@ -3,8 +3,8 @@
 import numpy as np
 import trimesh
 
+from arm_benchmarks.depth_tracking import DepthTracker, DepthTrackingParams, rotation_vector
 from arm_core.camera import intrinsics, look_at
-from arm_planner.depth_tracking import DepthTracker, DepthTrackingParams, rotation_vector
 
 
 def _pose(yaw_rad: float, translation) -> np.ndarray:

@@ -17,7 +17,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from arm_planner.depth_tracking import DepthTracker, rotation_vector
+from arm_benchmarks.depth_tracking import DepthTracker, rotation_vector
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.twin import TwinObject

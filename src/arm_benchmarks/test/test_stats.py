@@ -4,7 +4,16 @@ import math
 import numpy as np
 import pytest
 
-from arm_core.stats import bootstrap_interval, json_safe, mean, median, none_if_nan, percentile, rate, wilson_interval
+from arm_benchmarks.stats import (
+    bootstrap_interval,
+    json_safe,
+    mean,
+    median,
+    none_if_nan,
+    percentile,
+    rate,
+    wilson_interval,
+)
 
 
 def test_wilson_interval_known_value_and_empty():

@@ -1,6 +1,6 @@
 import pytest
 
-from arm_core.run_key import package_sources, run_key
+from arm_benchmarks.run_key import package_sources, run_key
 
 
 @pytest.fixture
