@@ -5,6 +5,7 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 import trimesh
+from test_depth_tracking import _pose
 
 from arm_benchmarks.bench_manip import ground_truth_objects
 from arm_benchmarks.depth_tracking import DepthTracker
@@ -19,14 +20,6 @@ from arm_planner.twin import decompose
 from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import SimWorld
-
-
-def _pose(rotation_z_rad: float, translation) -> np.ndarray:
-    T = np.eye(4)
-    c, s = np.cos(rotation_z_rad), np.sin(rotation_z_rad)
-    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-    T[:3, 3] = translation
-    return T
 
 
 def test_tracked_pose_moves_the_methods_mesh_by_the_true_motion():
