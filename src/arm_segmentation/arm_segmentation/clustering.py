@@ -114,18 +114,12 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
         a, b = _shifted(shift)
         za, zb = depth_m[a], depth_m[b]
         cut = (np.abs(za - zb) > depth_jump_limit(np.minimum(za, zb), s, params)) & (za > 0) & (zb > 0)
-        d = points_camera[a] - points_camera[b]
-        dn = normals_camera[a] - normals_camera[b]
-        convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
-        cut |= (convexity < -params.concave_threshold) & normal_valid[a] & normal_valid[b]
+        cut |= _concave(points_camera, normals_camera, normal_valid, a, b, params.concave_threshold)
         geometric[a] |= cut & mask[a] & mask[b]
         geometric[b] |= cut & mask[a] & mask[b]
-        if params.crease_reach > 1:  # a crease the sensor rounded over several steps
+        if params.crease_reach > 1:  # a crease the sensor rounded over several steps: both ends marked
             wide_a, wide_b = _shifted((shift[0] * params.crease_reach, shift[1] * params.crease_reach))
-            d = points_camera[wide_a] - points_camera[wide_b]
-            dn = normals_camera[wide_a] - normals_camera[wide_b]
-            wide = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
-            wide = (wide < -params.concave_threshold) & normal_valid[wide_a] & normal_valid[wide_b]
+            wide = _concave(points_camera, normals_camera, normal_valid, wide_a, wide_b, params.concave_threshold)
             wide &= mask[wide_a] & mask[wide_b]
             for end in (wide_a, wide_b):
                 geometric[end] |= wide
@@ -136,6 +130,15 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
         edge[a] |= cut
         edge[b] |= cut
     return edge, geometric
+
+
+def _concave(points_camera, normals_camera, normal_valid, a, b, threshold: float) -> np.ndarray:
+    """Bool over the pixel pairs (a, b) (slices from _shifted): a concave crease between them, the
+    normals turning towards each other by more than threshold along the step."""
+    d = points_camera[a] - points_camera[b]
+    dn = normals_camera[a] - normals_camera[b]
+    convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
+    return (convexity < -threshold) & normal_valid[a] & normal_valid[b]
 
 
 def _region_means(labels: np.ndarray, n: int, values: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 
 from arm_core.camera import look_at
-from arm_sim.world import RENDER_CAMERA, object_body_name, place_camera
+from arm_sim.world import RENDER_CAMERA, object_body_ids, place_camera
 
 STABLE_MOVE_M = 0.02
 STABLE_TURN_DEG = 15.0
@@ -28,11 +28,9 @@ class ObjectMotion:
 
 
 def _object_bodies(model: mujoco.MjModel) -> list[int]:
-    bodies, i = [], 0
-    while (body := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_body_name(i))) >= 0:
-        bodies.append(body)
-        i += 1
-    return bodies
+    """The scene's object bodies (arm_sim.world's object_<i>), in order."""
+    n_objects = sum(model.body(b).name.startswith("object_") for b in range(model.nbody))
+    return object_body_ids(model, n_objects).tolist()
 
 
 def _geom_z_range(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> tuple[float, float]:
