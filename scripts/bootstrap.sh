@@ -31,11 +31,13 @@ fi
 
 export AMENT_PREFIX_PATH="$ROOT/.venv" CMAKE_PREFIX_PATH="$ROOT/.venv"
 export PATH="$ROOT/.venv/bin:$PATH"
-# Interface packages missing from the ROS 2 wheels (tf2_msgs) are built from compat/ with the same
-# names and fields; if the venv ever holds them, compat/ is left out. A workspace on a full ROS 2
+# Interface packages missing from the ROS 2 wheels (tf2_msgs, control_msgs) are built from compat/
+# with the same names and fields; each one the venv holds is left out. A workspace on a full ROS 2
 # install builds src/ alone and uses the real packages.
 base_paths=(src)
-env -u PYTHONPATH .venv/bin/python -c "import tf2_msgs" 2>/dev/null || base_paths+=(compat)
+for interfaces in tf2_msgs control_msgs; do
+  env -u PYTHONPATH .venv/bin/python -c "import $interfaces" 2>/dev/null || base_paths+=("compat/$interfaces")
+done
 src_hash=$( (echo "${base_paths[*]}"; find "${base_paths[@]}" colcon.meta -type f \( -name '*.msg' -o -name '*.action' -o -name '*.txt' -o -name '*.xml' -o -name 'setup.py' -o -name 'setup.cfg' -o -name 'colcon.meta' -o -name '*.yaml' -o -name '*.launch.py' \) -print0 | sort -z | xargs -0 sha256sum) | sha256sum | cut -d' ' -f1)
 if [ "$(cat install/.src.sha 2>/dev/null)" != "$src_hash" ] || [ ! -f install/setup.bash ]; then
   echo "[bootstrap] colcon build"

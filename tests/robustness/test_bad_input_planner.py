@@ -12,7 +12,8 @@ from robustness_nodes import run_against
 
 from arm_benchmarks.robustness.cases.planner import run_planner_bad_inputs
 
-FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True}
+# the trajectories go out on the topic, where the harness inspects them
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True, "controller_interface": "topic"}
 
 
 @pytest.fixture(scope="module")

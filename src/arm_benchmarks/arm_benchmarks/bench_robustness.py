@@ -56,7 +56,8 @@ PHASES = (
     "qos",
     "load_fault",
 )
-FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1}
+# the trajectories go out on the topic, where the harness inspects them
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "controller_interface": "topic"}
 
 
 def _frames(width: int, height: int) -> dict:

@@ -172,7 +172,9 @@ def run_seed(
     processes["reconstruction"] = NodeProcess(
         "reconstruction", log_dir / "reconstruction.log", params=sim_time | (reconstruction_params or {})
     )
-    processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=sim_time | (planner_params or {}))
+    # the trajectory on the topic: a goal's result then comes when planning ends, which this times
+    planner = sim_time | {"controller_interface": "topic"} | (planner_params or {})
+    processes["planner"] = NodeProcess("planner", log_dir / "planner.log", params=planner)
     rows = []
     try:
         client.meshes, client.planner_diag = None, {}

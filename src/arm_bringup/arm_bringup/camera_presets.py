@@ -86,7 +86,6 @@ def node_parameters(preset: dict, key: str) -> dict:
     return dict(preset["parameters"].get(key) or {})
 
 
-
 def node_options(preset: dict | None, key: str) -> dict:
     """NodeProcess keyword arguments (params, remaps) of a preset for one graph node; {} without one."""
     if preset is None:

@@ -80,7 +80,7 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     if not result_future.done():
         return {"error": "planning timed out"}
     result = result_future.result().result
-    plan_s = time.monotonic() - t0
+    plan_s = time.monotonic() - t0  # planning and, with ros2_control, the execution
     duration = 0.0
     if result.trajectory.points:
         last = result.trajectory.points[-1].time_from_start
@@ -105,6 +105,15 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
         "planned_success": bool(result.success),
         "message": result.message,
         "predicted_error_m": round(float(result.final_error_m), 4),
+        "controller_error_code": int(result.controller_error_code),
+        "controller_message": result.controller_message,
+        "observed_displacement_m": (
+            np.round(
+                [result.observed_displacement.x, result.observed_displacement.y, result.observed_displacement.z], 4
+            ).tolist()
+            if result.displacement_observed
+            else None
+        ),
         "planning_s": round(plan_s, 1),
         "trajectory_s": round(duration, 2),
         "target_displacement_m": np.round(moved, 4).tolist(),

@@ -199,5 +199,3 @@ def search_grasp_site(
         if clearance_m(hand_points(point, site.axis_xy, fingers), target.obstacle_halfspaces) >= 0:
             return site
     return best
-
-

@@ -1,4 +1,10 @@
-"""plan_node: action /arm/manipulate -> MPPI plan in the MuJoCo twin -> /arm/joint_trajectory.
+"""plan_node: action /arm/manipulate -> MPPI plan in the MuJoCo twin -> the robot's controllers.
+
+The plan goes to a ros2_control robot as a FollowJointTrajectory goal for the arm and GripperCommand
+goals for the gripper (controller_client; controller_interface ros2_control), or as one JointTrajectory
+of arm and finger joints on /arm/joint_trajectory (topic). With ros2_control the goal's result carries
+the arm controller's error code and, once a frame taken after the motion shows the target, its
+observed displacement.
 
 Subscribes /arm/meshes (reliable, transient-local) and keeps the last scene_history arrays, so a goal
 plans on the array its target id was read from (goal.meshes_stamp; zero: the latest). Keeps only the
@@ -30,10 +36,11 @@ from trajectory_msgs.msg import JointTrajectory
 
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
+from arm_planner.controller_client import ControllerClient, ExecutionReport
 from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
-from arm_planner.scenes import Scene, SceneHistory, follow_target
+from arm_planner.scenes import Scene, SceneHistory, follow_target, observed_displacement
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.streaming import TrajectoryStream
 from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
@@ -141,7 +148,40 @@ class PlanNode(Node):
     def __init__(self, **node_options):
         super().__init__("plan_node", **node_options)
         config, timestep = _planner_config(self)
-        self.execute_plans = declare(self, "execute", True, "Publish the planned trajectory to the controller")
+        self.execute_plans = declare(self, "execute", True, "Send the planned trajectory to the controllers")
+        self.controller_interface = declare(
+            self,
+            "controller_interface",
+            "ros2_control",
+            "ros2_control: FollowJointTrajectory and GripperCommand goals; topic: JointTrajectory on "
+            "arm/joint_trajectory (no execution feedback)",
+            choices=["ros2_control", "topic"],
+        )
+        arm_controller = declare(
+            self, "arm_controller", "arm_controller", "Joint trajectory controller: <name>/follow_joint_trajectory"
+        )
+        gripper_controller = declare(
+            self, "gripper_controller", "gripper_controller", "Gripper action controller: <name>/gripper_cmd"
+        )
+        gripper_max_effort_n = declare(
+            self, "gripper_max_effort_n", 70.0, "GripperCommand max_effort, N (0: the controller's)", 0.0, 1000.0
+        )
+        self.execution_margin_s = declare(
+            self,
+            "execution_margin_s",
+            5.0,
+            "Wait this long past the trajectory's end for the arm controller's result, s",
+            0.0,
+            600.0,
+        )
+        self.observe_timeout_s = declare(
+            self,
+            "observe_timeout_s",
+            15.0,
+            "After the motion, wait this long for meshes of a newer frame to observe the target (0: do not), s",
+            0.0,
+            600.0,
+        )
         self.replan_period_s = declare(
             self, "replan_period_s", 0.0, "Closed loop: execute this long, then re-plan (0: open loop)", 0.0, 60.0
         )
@@ -189,6 +229,11 @@ class PlanNode(Node):
             raise ValueError(f"robot_base_xyz_m must be 3 finite values, got {list(base_xyz)}")
         self.session = ManipulationSession(config, timestep, robot_base_world=(float(base_xyz[0]), float(base_xyz[1])))
         self.finger_joint = self.session.robot.trajectory_joint_names[-1]
+        self.controllers = None
+        if self.controller_interface == "ros2_control":
+            self.controllers = ControllerClient(
+                self, arm_controller, gripper_controller, self.finger_joint, gripper_max_effort_n
+            )
         self.errors = RateLimitedErrors(self.get_logger())
 
         self._lock = threading.Lock()
@@ -297,13 +342,21 @@ class PlanNode(Node):
             return scene, target_id
         return latest, followed
 
+    def _send(self, joint_names, times_s, positions, stamp) -> None:
+        """Execute a trajectory whose times count from `stamp` (the node's clock)."""
+        self._sent = True
+        if self.controllers is not None:
+            self.controllers.send(joint_names, times_s, positions, stamp)
+        else:
+            msg = trajectory_msg(joint_names, times_s, positions)
+            msg.header.stamp = stamp
+            self.pub_trajectory.publish(msg)
+
     def _stream_part(self, stream: TrajectoryStream, joint_names) -> None:
         now = self.get_clock().now()  # one reading: the part's times count from its stamp
         part = stream.part(1e-9 * now.nanoseconds)
         if part is not None and self.execute_plans:
-            msg = trajectory_msg(joint_names, part.times_s, part.positions)
-            msg.header.stamp = now.to_msg()
-            self.pub_trajectory.publish(msg)
+            self._send(joint_names, part.times_s, part.positions, now.to_msg())
 
     def _plan_once(
         self,
@@ -382,7 +435,7 @@ class PlanNode(Node):
         msg = trajectory_msg(result.joint_names, result.times_s[:n], result.joint_positions[:n])
         msg.header.stamp = self.get_clock().now().to_msg()
         if self.execute_plans and publish and n:
-            self.pub_trajectory.publish(msg)
+            self._send(result.joint_names, result.times_s[:n], result.joint_positions[:n], msg.header.stamp)
         return msg
 
     def execute(self, goal_handle):
@@ -401,6 +454,7 @@ class PlanNode(Node):
     def _execute(self, goal_handle):
         goal = goal_handle.request
         self.goals += 1
+        self._sent, self._goal_start = False, None
         task = TASK_NAMES.get(int(goal.task))
         if task is None:
             outcome = Outcome(False, f"unknown task {goal.task}; expected one of {sorted(TASK_NAMES)}")
@@ -416,7 +470,11 @@ class PlanNode(Node):
             message=outcome.message,
             final_error_m=float(outcome.final_error_m),
             trajectory=trajectory,
+            controller_error_code=Manipulate.Result.EXECUTION_NOT_SENT,
+            controller_message="not executed",
         )
+        if self._sent:
+            self._execution_result(goal_handle, task, goal, result)
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
             result.message = "canceled: " + result.message
@@ -429,6 +487,7 @@ class PlanNode(Node):
         if scene is None:
             return Outcome(False, problem), JointTrajectory()
         target_id = int(goal.target_id)
+        self._goal_start = (scene, target_id)
         if self.replan_period_s <= 0 and self.stream:
             stream = TrajectoryStream(self.session.config.mppi.control_dt_s, self.stream_lead_s, self.stream_period_s)
             outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None, stream)
@@ -476,6 +535,52 @@ class PlanNode(Node):
         )
         return outcome, executed
 
+    # --- execution ---------------------------------------------------------------------------
+    def _execution_result(self, goal_handle, task: str, goal, result) -> None:
+        """Fill `result` with how the execution went: the arm controller's result and the target's
+        observed displacement."""
+        if self.controllers is None:
+            result.controller_error_code = Manipulate.Result.EXECUTION_UNCONFIRMED
+            result.controller_message = "sent on arm/joint_trajectory (no controller feedback)"
+            return
+        goal_handle.publish_feedback(Manipulate.Feedback(state="executing", executing=True))
+        report = self.controllers.wait(
+            self.execution_margin_s, should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok()
+        )
+        if goal_handle.is_cancel_requested:
+            self.controllers.cancel()
+        result.controller_error_code, result.controller_message = report.error_code, report.message
+        if report.error_code != 0 or self.observe_timeout_s <= 0 or self._goal_start is None:
+            return
+        scene, target_id = self._goal_start
+        newer = self._scene_after(report, self.observe_timeout_s)
+        if newer is None:
+            result.controller_message += f"; no meshes of a frame after the motion within {self.observe_timeout_s} s"
+            return
+        if task == "grasp":
+            expected = (0.0, 0.0, self.session.config.grasp_lift_goal_m)
+        else:
+            expected = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
+        moved = observed_displacement(scene, target_id, newer, expected, self.replan_target_radius_m)
+        if moved is None:
+            result.controller_message += "; the target was not found in the meshes after the motion"
+            return
+        result.displacement_observed = True
+        result.observed_displacement.x, result.observed_displacement.y, result.observed_displacement.z = (
+            float(v) for v in moved
+        )
+
+    def _scene_after(self, report: ExecutionReport, timeout_s: float) -> Scene | None:
+        """The first meshes of a frame stamped after the motion ended, waiting up to timeout_s (wall s)."""
+        deadline = time.monotonic() + timeout_s
+        while rclpy.ok() and time.monotonic() < deadline:
+            with self._lock:
+                latest = self._scenes.latest()
+            if latest is not None and latest.stamp_ns > report.end_ns:
+                return latest
+            time.sleep(0.1)
+        return None
+
     # --- diagnostics -------------------------------------------------------------------------
     def publish_diagnostics(self) -> None:
         with self._lock:
@@ -498,12 +603,14 @@ class PlanNode(Node):
         self.pub_diag.publish(diagnostics_msg(self, "planner", values, level, message))
 
     def close(self) -> None:
+        if self.controllers is not None:
+            self.controllers.close()
         self.action_server.destroy()
         self.session.close()
 
 
 def main(args=None) -> int:
-    return run_node(PlanNode, args, executor_factory=lambda: QueueAwareMultiThreadedExecutor(num_threads=3))
+    return run_node(PlanNode, args, executor_factory=lambda: QueueAwareMultiThreadedExecutor(num_threads=4))
 
 
 if __name__ == "__main__":

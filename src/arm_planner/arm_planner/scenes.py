@@ -59,13 +59,35 @@ class SceneHistory:
         return [s.stamp_ns for s in self._scenes]
 
 
+def nearest_object(scene: Scene, points_m, max_distance_m: float) -> TwinObject | None:
+    """The object of `scene` whose centre is nearest any of `points_m` ([k, 3] or [3], world, m), if
+    within max_distance_m."""
+    if not scene.objects:
+        return None
+    centres = np.array([np.asarray(o.T_world_object)[:3, 3] for o in scene.objects])
+    points = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    distances = np.linalg.norm(centres[:, None, :] - points[None, :, :], axis=2).min(axis=1)
+    nearest = int(np.argmin(distances))
+    return scene.objects[nearest] if distances[nearest] <= max_distance_m else None
+
+
 def follow_target(previous: Scene, target_id: int, newer: Scene, max_distance_m: float) -> int | None:
     """Id in `newer` of the object `target_id` of `previous`: the object whose centre is nearest the
     target's old centre, if within max_distance_m (m); None when none is."""
     old = previous.centre_world(target_id)
-    if old is None or not newer.objects:
+    found = None if old is None else nearest_object(newer, old, max_distance_m)
+    return None if found is None else int(found.id)
+
+
+def observed_displacement(
+    previous: Scene, target_id: int, newer: Scene, expected_m, max_distance_m: float
+) -> np.ndarray | None:
+    """How far the target `target_id` of `previous` moved by `newer` (world, m): its centre there is the
+    object nearest either where it was or where the task should have put it (old centre + expected_m),
+    within max_distance_m; None when none is."""
+    old = previous.centre_world(target_id)
+    if old is None:
         return None
-    centres = np.array([np.asarray(o.T_world_object)[:3, 3] for o in newer.objects])
-    distances = np.linalg.norm(centres - old, axis=1)
-    nearest = int(np.argmin(distances))
-    return int(newer.objects[nearest].id) if distances[nearest] <= max_distance_m else None
+    goal = old + np.asarray(expected_m, dtype=np.float64)
+    found = nearest_object(newer, np.stack([old, goal]), max_distance_m)
+    return None if found is None else np.asarray(found.T_world_object, dtype=np.float64)[:3, 3] - old

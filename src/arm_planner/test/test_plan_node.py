@@ -19,14 +19,19 @@ from arm_planner.plan_node import PlanNode
 from arm_ros.common import latched_qos
 from arm_ros.conversions.meshes import mesh_to_msg
 from arm_ros.conversions.poses import matrix_to_pose
-from arm_ros.executors import QueueAwareMultiThreadedExecutor
+from arm_ros.executors import QueueAwareMultiThreadedExecutor, result_within
 from arm_sim import robot
 
 
 @pytest.fixture(scope="module")
 def graph():
     rclpy.init()
-    overrides = [Parameter("steps", value=5), Parameter("push_steps", value=0), Parameter("settle_s", value=0.0)]
+    overrides = [
+        Parameter("steps", value=5),
+        Parameter("push_steps", value=0),
+        Parameter("settle_s", value=0.0),
+        Parameter("controller_interface", value="topic"),  # the trajectory as the tests receive it
+    ]
     node = PlanNode(parameter_overrides=overrides)
     client = Node("plan_node_test_client")
     executor = QueueAwareMultiThreadedExecutor(num_threads=4)
@@ -48,11 +53,7 @@ def graph():
 
 
 def _wait(future, timeout=60.0):
-    deadline = time.monotonic() + timeout
-    while not future.done():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
-    return future.result()
+    return result_within(future, timeout)
 
 
 def _send(action, task, target_id, displacement=(0.0, 0.0, 0.0), meshes_stamp_s=0):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from arm_planner.scenes import Scene, SceneHistory, follow_target
+from arm_planner.scenes import Scene, SceneHistory, follow_target, observed_displacement
 from arm_planner.twin import TwinObject
 
 
@@ -37,3 +37,13 @@ def test_follow_target_by_nearest_centre_within_radius():
     assert follow_target(old, 3, newer, 0.01) is None
     assert follow_target(old, 9, newer, 0.05) is None  # not in the old scene
     assert follow_target(old, 3, _scene(3, {}), 0.05) is None
+
+
+def test_observed_displacement_finds_the_target_where_it_was_or_where_the_task_put_it():
+    before = _scene(1, {3: (0.1, 0.0, 0.05), 5: (0.3, 0.0, 0.05)})
+    pushed = _scene(2, {1: (0.3, 0.0, 0.05), 2: (0.1, 0.2, 0.05)})
+    assert np.allclose(observed_displacement(before, 3, pushed, (0.0, 0.21, 0.0), 0.05), (0.0, 0.2, 0.0))
+    missed = _scene(3, {1: (0.3, 0.0, 0.05), 2: (0.11, 0.0, 0.05)})  # the push left it where it was
+    assert np.allclose(observed_displacement(before, 3, missed, (0.0, 0.21, 0.0), 0.05), (0.01, 0.0, 0.0))
+    assert observed_displacement(before, 3, _scene(4, {1: (0.3, 0.0, 0.05)}), (0.0, 0.21, 0.0), 0.05) is None
+    assert observed_displacement(before, 9, pushed, (0.0, 0.0, 0.0), 0.05) is None

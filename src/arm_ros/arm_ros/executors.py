@@ -60,3 +60,13 @@ class QueueAwareMultiThreadedExecutor(MultiThreadedExecutor):
             if task.done():
                 del self._submitted[task]
                 task.result()  # raise any exception of the callback
+
+
+def result_within(future, timeout_s: float):
+    """The result of an rclpy future that an executor spinning in another thread completes, waiting at
+    most timeout_s (s); raises TimeoutError."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s):
+        raise TimeoutError(f"no result within {timeout_s} s")
+    return future.result()

@@ -1,8 +1,10 @@
-"""Whether an action server is serving a goal, read from its status topic (<action>/_action/status).
+"""Whether the planner is planning a goal, read from its action's status and feedback topics
+(<action>/_action/status, <action>/_action/feedback).
 
 Used to hold back heavy perception work while the planner plans (it shares the CPU). The pause ends
-when no goal is accepted, executing or cancelling, when the server's status publisher is gone (a
-planner that died mid-goal) or after `limit_s` (a goal that never ends).
+when every goal still accepted, executing or cancelling has reported `executing` in its feedback
+(planning is over, the robot moves and a new frame may show the result), when the server's status
+publisher is gone (a planner that died mid-goal) or after `limit_s` (a goal that never ends).
 """
 
 import time
@@ -10,14 +12,15 @@ import time
 from action_msgs.msg import GoalStatus, GoalStatusArray
 from rclpy.qos import qos_profile_action_status_default
 
+from arm_interfaces.action import Manipulate
 from arm_ros.common import declare
 
 ACTIVE_STATES = (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING, GoalStatus.STATUS_CANCELING)
 
 
-def active_goal_count(msg: GoalStatusArray) -> int:
-    """Goals in `msg` that the server is still serving."""
-    return sum(status.status in ACTIVE_STATES for status in msg.status_list)
+def active_goal_ids(msg: GoalStatusArray) -> set[bytes]:
+    """Ids of the goals in `msg` that the server is still serving."""
+    return {bytes(s.goal_info.goal_id.uuid) for s in msg.status_list if s.status in ACTIVE_STATES}
 
 
 class GoalActivity:
@@ -31,10 +34,25 @@ class GoalActivity:
         self.on_change = on_change
         self.active_since_s: float | None = None  # time.monotonic() when a goal became active
         self.pauses = 0
+        self.active: set[bytes] = set()  # goals being served
+        self.executing: set[bytes] = set()  # of those, the ones whose planning is over
         node.create_subscription(GoalStatusArray, self.topic, self._on_status, qos_profile_action_status_default)
+        node.create_subscription(
+            Manipulate.Impl.FeedbackMessage, f"{action_name}/_action/feedback", self._on_feedback, 10
+        )
 
     def _on_status(self, msg: GoalStatusArray) -> None:
-        if active_goal_count(msg) == 0:
+        self.active = active_goal_ids(msg)
+        self.executing &= self.active
+        self._update()
+
+    def _on_feedback(self, msg) -> None:
+        if msg.feedback.executing:
+            self.executing.add(bytes(msg.goal_id.uuid))
+            self._update()
+
+    def _update(self) -> None:
+        if not (self.active - self.executing):
             self.active_since_s = None
         elif self.active_since_s is None:
             self.active_since_s = time.monotonic()

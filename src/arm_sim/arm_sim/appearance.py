@@ -61,7 +61,13 @@ class SceneAppearance:
     def subset(self, keep: np.ndarray) -> "SceneAppearance":
         looks = [look for look, k in zip(self.objects, keep, strict=True) if k]
         return SceneAppearance(
-            looks, self.surfaces, self.table_texture_repeat, self.boxes, self.lights, self.ambient, self.depth_shift_px,
+            looks,
+            self.surfaces,
+            self.table_texture_repeat,
+            self.boxes,
+            self.lights,
+            self.ambient,
+            self.depth_shift_px,
             self.shadows,
         )
 
@@ -90,8 +96,12 @@ def _table_legs(table_z: float, floor_z: float, half_extent: tuple, inset_m: flo
     hx, hy = half_extent
     half_height = 0.5 * (table_z - TABLE_THICKNESS_M - floor_z)
     return [
-        StaticBox(f"table_leg_{i}", (sx * (hx - inset_m), sy * (hy - inset_m), floor_z + half_height),
-                  (0.025, 0.025, half_height), rgb)
+        StaticBox(
+            f"table_leg_{i}",
+            (sx * (hx - inset_m), sy * (hy - inset_m), floor_z + half_height),
+            (0.025, 0.025, half_height),
+            rgb,
+        )
         for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1)))
     ]
 
@@ -106,8 +116,12 @@ def _chair(name: str, x: float, y: float, yaw: float, floor_z: float, rgb: tuple
     parts.append(StaticBox(f"{name}_back", (bx, by, floor_z + seat_h + 0.22), (*thin, 0.22), rgb))
     for i, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
         parts.append(
-            StaticBox(f"{name}_leg_{i}", (x + sx * (half - 0.02), y + sy * (half - 0.02), floor_z + seat_h / 2),
-                      (0.015, 0.015, seat_h / 2), rgb)
+            StaticBox(
+                f"{name}_leg_{i}",
+                (x + sx * (half - 0.02), y + sy * (half - 0.02), floor_z + seat_h / 2),
+                (0.015, 0.015, seat_h / 2),
+                rgb,
+            )
         )
     return parts
 
@@ -149,8 +163,12 @@ def sample_appearance(
         half = (float(rng.uniform(0.25, 0.45)), float(rng.uniform(0.25, 0.45)))
         boxes.append(StaticBox("side_table", (x, y, top_z - 0.02), (*half, 0.02), (0.5, 0.4, 0.3), "furniture"))
         boxes += [
-            StaticBox(f"side_table_leg_{k}", (x + sx * (half[0] - 0.03), y + sy * (half[1] - 0.03),
-                      (floor_z + top_z) / 2), (0.02, 0.02, (top_z - floor_z) / 2), (0.3, 0.3, 0.3))
+            StaticBox(
+                f"side_table_leg_{k}",
+                (x + sx * (half[0] - 0.03), y + sy * (half[1] - 0.03), (floor_z + top_z) / 2),
+                (0.02, 0.02, (top_z - floor_z) / 2),
+                (0.3, 0.3, 0.3),
+            )
             for k, (sx, sy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1)))
         ]
     for i in range(int(rng.integers(0, 4))):  # boxes on the floor
@@ -162,12 +180,20 @@ def sample_appearance(
     for i in range(int(rng.integers(1, 4))):
         azimuth, elevation = rng.uniform(0, 2 * np.pi), rng.uniform(np.deg2rad(35), np.deg2rad(85))
         distance = rng.uniform(1.5, 3.0)
-        pos = distance * np.array([np.cos(azimuth) * np.cos(elevation), np.sin(azimuth) * np.cos(elevation),
-                                   np.sin(elevation)])
+        pos = distance * np.array(
+            [np.cos(azimuth) * np.cos(elevation), np.sin(azimuth) * np.cos(elevation), np.sin(elevation)]
+        )
         warmth = rng.uniform(-0.15, 0.15)
         colour = np.clip(np.array([1 + warmth, 1.0, 1 - warmth]) * rng.uniform(0.35, 0.8), 0, 1)
-        lights.append(Light(tuple(pos + (0, 0, table_z)), tuple(-pos / distance), tuple(colour),
-                            tuple(colour * rng.uniform(0.2, 0.6)), cast_shadow=i == 0))
+        lights.append(
+            Light(
+                tuple(pos + (0, 0, table_z)),
+                tuple(-pos / distance),
+                tuple(colour),
+                tuple(colour * rng.uniform(0.2, 0.6)),
+                cast_shadow=i == 0,
+            )
+        )
     shift = tuple(int(v) for v in rng.integers(-1, 2, size=2))
     ambient = tuple(np.full(3, rng.uniform(0.25, 0.45)))
     repeat = (1.0, 1.0)  # the procedural surfaces do not tile seamlessly

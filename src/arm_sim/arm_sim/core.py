@@ -61,6 +61,20 @@ class SimSession:
         self._next_servo_s = self.time_s
         return len(self._targets)
 
+    def command_gripper(self, position: float) -> float:
+        """Set the finger's servo target (m, clipped to its range) now and for the rest of the followed
+        trajectory, which keeps driving the arm (the gripper has its own controller): the target set."""
+        lo, hi = self.world.model.actuator_ctrlrange[len(COMMAND_NAMES) - 1]
+        target = float(np.clip(position, lo, hi))
+        self.world.data.ctrl[len(COMMAND_NAMES) - 1] = target
+        if len(self._targets):
+            self._targets[:, -1] = target
+        return target
+
+    def finger_effort_n(self) -> float:
+        """The finger actuator's force, N (absolute)."""
+        return float(abs(self.world.data.actuator_force[len(COMMAND_NAMES) - 1]))
+
     @property
     def following(self) -> bool:
         return len(self._targets) > 0

@@ -1,5 +1,7 @@
 """sim_node: owns the ground-truth MuJoCo world, publishes RGB-D + camera + joint states + ground
-truth, executes JointTrajectory commands, and publishes /clock (simulated time)."""
+truth and /clock (simulated time), and executes the robot's commands as ros2_control does: the arm's
+FollowJointTrajectory and the gripper's GripperCommand actions (arm_sim.controllers), or a
+JointTrajectory on /arm/joint_trajectory."""
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -24,14 +26,11 @@ from arm_ros.common import (
 from arm_ros.conversions.images import camera_info_from_K, numpy_to_image
 from arm_ros.conversions.meshes import reconstructed_object_msg
 from arm_ros.conversions.poses import matrix_to_pose
-from arm_ros.conversions.stamps import time_ns
 from arm_ros.goal_activity import declare_goal_pause
 from arm_sim import robot
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
+from arm_sim.controllers import SimControllers, trajectory_start_s
 from arm_sim.core import SimSession
-
-# A trajectory stamped further than this from the sim clock (s) starts on arrival instead.
-STAMP_TOLERANCE_S = 5.0
 
 
 class SimNode(Node):
@@ -91,6 +90,14 @@ class SimNode(Node):
         self.pub_truth = self.create_publisher(ReconstructedObjectArray, "sim/ground_truth/objects", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.create_subscription(JointTrajectory, "arm/joint_trajectory", self.on_trajectory, 10)
+        self.controllers = SimControllers(
+            self,
+            self.session,
+            declare(self, "arm_controller", "arm_controller", "Arm controller name: <name>/follow_joint_trajectory"),
+            declare(self, "gripper_controller", "gripper_controller", "Gripper controller name: <name>/gripper_cmd"),
+            lambda: self.session.time_s,
+            self.header,
+        )
         self._next_render_s = 0.0
         self._render_ms = 0.0
         self.frames_published = 0
@@ -116,6 +123,7 @@ class SimNode(Node):
             times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points]
             positions = [list(p.positions) for p in msg.points]
             targets = self.session.follow(msg.joint_names, times, positions, self.trajectory_start_s(msg))
+            self.controllers.cancel_arm("replaced by a trajectory on arm/joint_trajectory")
             self.trajectories_followed += 1
             self.get_logger().info(f"executing trajectory: {len(msg.points)} points, {targets} servo targets")
         except ValueError as error:
@@ -123,22 +131,15 @@ class SimNode(Node):
             self.errors.error("bad_trajectory", f"rejected trajectory: {error}")
 
     def trajectory_start_s(self, msg: JointTrajectory) -> float | None:
-        """The trajectory's time zero on the sim clock (s): its header stamp, or None (start now) for a
-        zero stamp or one more than STAMP_TOLERANCE_S off the sim clock (a sender not on /clock)."""
-        start_s = 1e-9 * time_ns(msg.header.stamp)
-        if start_s == 0.0:
-            return None
-        if abs(start_s - self.session.time_s) > STAMP_TOLERANCE_S:
-            self.errors.error(
-                "trajectory_stamp",
-                f"trajectory stamped {start_s:.3f} s, {start_s - self.session.time_s:+.3f} s from the sim clock "
-                "(is the sender on /clock, use_sim_time:=true?); started now",
-            )
-            return None
+        """The trajectory's time zero on the sim clock (s); None: start now (controllers.trajectory_start_s)."""
+        start_s, warning = trajectory_start_s(msg.header.stamp, self.session.time_s)
+        if warning:
+            self.errors.error("trajectory_stamp", warning)
         return start_s
 
     def on_tick(self) -> None:
         self.session.step(1.0 / self.physics_rate_hz)
+        self.controllers.tick()
         self.pub_clock.publish(ClockMsg(clock=self.stamp()))
         self.publish_joint_state()
         due = self.session.time_s + 1e-9 >= self._next_render_s
@@ -177,6 +178,8 @@ class SimNode(Node):
                     "sim_time_s": self.session.time_s,
                     "trajectories_followed": self.trajectories_followed,
                     "trajectories_rejected": self.trajectories_rejected,
+                    "arm_goals": self.controllers.goals["arm"],
+                    "gripper_goals": self.controllers.goals["gripper"],
                     "goal_pauses": self.goals.pauses if self.goals is not None else 0,
                 },
             )
@@ -191,6 +194,7 @@ class SimNode(Node):
         self.pub_truth.publish(msg)
 
     def close(self) -> None:
+        self.controllers.close()
         self.session.close()
 
 

@@ -127,7 +127,7 @@ def tiles(rng: np.random.Generator, size_px: int) -> np.ndarray:
     a, b = random_colour(rng, muted=True), random_colour(rng, muted=True)
     image = np.where(((x + y) % 2 == 0)[..., None], a, 0.7 * a + 0.3 * b)
     cell = size_px // n
-    grout = (np.arange(size_px) % cell < max(1, cell // 16))
+    grout = np.arange(size_px) % cell < max(1, cell // 16)
     image[grout] = 0.8
     image[:, grout] = 0.8
     return np.clip(image + rng.normal(0, 0.02, size=(size_px, size_px, 1)), 0, 1)
