@@ -71,11 +71,11 @@ def test_keys_outside_rosdistro_are_defined_in_the_repository():
 
 
 def _is_ros_package(name: str) -> bool:
-    """Workspace packages and ROS packages (message packages, rclpy, launch, ament_index_python)."""
+    """Workspace packages and ROS packages (message packages, rclpy, launch, ament_index_python, tf2_ros)."""
     return (
         name.startswith("arm_")
         or name.endswith(("_msgs", "_srvs", "_interfaces"))
-        or name in {"rclpy", "launch", "launch_ros", "ament_index_python", "rosidl_runtime_py"}
+        or name in {"rclpy", "launch", "launch_ros", "ament_index_python", "rosidl_runtime_py", "tf2_ros"}
     )
 
 

@@ -5,8 +5,7 @@ config/cameras/<name>.yaml (installed to share/arm_bringup/config/cameras):
 
     camera:
       driver: realsense2_camera                 # the driver package, for people
-      camera_frame_id: camera_color_optical_frame  # header.frame_id of the driver's images
-      encodings: {color: rgb8, depth: 16UC1}    # what the driver publishes (all accepted by the node)
+      camera_frame_id: camera_color_optical_frame  # the driver's optical frame: segmentation's camera_frame
       remappings:                               # graph topic: driver topic
         camera/color/image_raw: /camera/camera/color/image_raw
         camera/depth/image_raw: /camera/camera/aligned_depth_to_color/image_raw
@@ -14,7 +13,9 @@ config/cameras/<name>.yaml (installed to share/arm_bringup/config/cameras):
       parameters:                               # per graph node (bringup's keys): name: value
         segmentation: {camera_pose_source: estimate, image_reliability: best_effort}
 
-The remappings go to the nodes that subscribe to the camera (segmentation); `bringup --camera NAME`
+Any top-level key but these is refused. camera_frame_id becomes segmentation_node's `camera_frame`
+(the frame /tf lookups and the estimated `table` frame hang from). The remappings go to the nodes that
+subscribe to the camera (segmentation); `bringup --camera NAME`
 passes them as `-r` and the parameters as `-p` after the node's parameter file
 (arm_ros.processes.NodeProcess), and the launch file's `camera:=NAME` gives them to launch_ros's Node
 as remappings and parameters. With a preset the simulator is not started.
@@ -27,6 +28,7 @@ from ament_index_python.packages import PackageNotFoundError, get_package_share_
 
 GRAPH_CAMERA_TOPICS = ("camera/color/image_raw", "camera/depth/image_raw", "camera/camera_info")
 CAMERA_NODES = ("segmentation",)  # graph nodes that subscribe to the camera topics
+PRESET_KEYS = ("driver", "camera_frame_id", "remappings", "parameters")
 NODE_KEYS = ("segmentation", "reconstruction", "planner")
 
 
@@ -66,6 +68,11 @@ def load_preset(name: str) -> dict:
         raise PresetError(f"{path}: not a preset ({error})") from error
     if not isinstance(camera, dict):
         raise PresetError(f"{path}: no top-level 'camera' mapping")
+    unknown_keys = sorted(set(camera) - set(PRESET_KEYS))
+    if unknown_keys:
+        raise PresetError(f"{path}: unknown keys {unknown_keys}; a preset has {list(PRESET_KEYS)}")
+    if not isinstance(camera.get("camera_frame_id", ""), str):
+        raise PresetError(f"{path}: camera_frame_id must be a frame name")
     remappings = camera.get("remappings") or {}
     unknown = sorted(set(remappings) - set(GRAPH_CAMERA_TOPICS))
     if unknown or not remappings:
@@ -83,7 +90,12 @@ def node_remappings(preset: dict, key: str) -> dict[str, str]:
 
 
 def node_parameters(preset: dict, key: str) -> dict:
-    return dict(preset["parameters"].get(key) or {})
+    """A node's parameters from a preset: its `parameters` entry, and for the camera's nodes the
+    optical frame (camera_frame_id) unless the entry sets camera_frame itself."""
+    parameters = dict(preset["parameters"].get(key) or {})
+    if key in CAMERA_NODES and preset.get("camera_frame_id"):
+        parameters.setdefault("camera_frame", preset["camera_frame_id"])
+    return parameters
 
 
 def node_options(preset: dict | None, key: str) -> dict:

@@ -22,8 +22,8 @@ def test_preset_remaps_every_graph_camera_topic(path):
     preset = load_preset(str(path))
     assert set(preset["remappings"]) == set(GRAPH_CAMERA_TOPICS) == SEGMENTATION_CAMERA_TOPICS
     assert all(topic.startswith("/") for topic in preset["remappings"].values())
-    assert preset["camera_frame_id"] and preset["encodings"]["depth"] == "16UC1"
     options = node_options(preset, "segmentation")
+    assert options["params"]["camera_frame"] == preset["camera_frame_id"]  # the driver's optical frame
     assert options["params"]["camera_pose_source"] == "estimate"
     assert options["params"]["image_reliability"] == "best_effort"
     assert node_options(preset, "reconstruction") == {"params": {}, "remaps": {}}
@@ -44,6 +44,9 @@ def test_unknown_or_malformed_preset_is_refused(tmp_path):
         load_preset(str(bad))
     bad.write_text("camera:\n  remappings: {camera/camera_info: /x}\n  parameters: {segmentaton: {}}\n")
     with pytest.raises(PresetError, match="keyed by graph node"):
+        load_preset(str(bad))
+    bad.write_text("camera:\n  remappings: {camera/camera_info: /x}\n  encodings: {depth: 16UC1}\n")
+    with pytest.raises(PresetError, match="unknown keys.*encodings"):  # a field no code would read
         load_preset(str(bad))
 
 

@@ -1,13 +1,16 @@
-"""/tf and /tf_static without tf2_ros: a publisher, and a listener that chains the latest transforms.
+"""/tf and /tf_static: a publisher, and a listener (tf2_ros's where it is installed, else one that
+chains the latest transforms).
 
 The Python-wheel install has no tf2_ros (nor tf2_msgs, which compat/ builds with the same definition,
 so the wire type matches a full ROS 2 install's). These speak tf2's topics with tf2_ros's QoS: a robot's
 TF tree (robot_state_publisher, a camera driver, a calibration) reaches the nodes, and RViz or tf2_ros
 see what they publish. The listener keeps the latest transform of each frame from its parent (no
 interpolation in time: the newest wins) and chains them through the tree; it holds at most
-max_frames frames.
+max_frames frames. Where tf2_ros can be imported (a full ROS 2 install), `tf_listener` gives tf2_ros's
+buffer behind the same two methods instead.
 """
 
+import re
 from collections import OrderedDict, deque
 
 import numpy as np
@@ -93,3 +96,37 @@ class TfListener:
                 seen.add(other)
                 queue.append((other, T_target_other))
         return None
+
+
+class Tf2RosListener:
+    """tf2_ros's Buffer and TransformListener behind TfListener's methods (the latest transforms)."""
+
+    def __init__(self, node, tf2_ros):
+        self._tf2_ros = tf2_ros
+        self.buffer = tf2_ros.Buffer()
+        self.listener = tf2_ros.TransformListener(self.buffer, node)
+
+    def frames(self) -> set[str]:
+        return set(re.findall(r"Frame (\S+) exists", self.buffer.all_frames_as_string()))
+
+    def lookup(self, target: str, source: str) -> np.ndarray | None:
+        from rclpy.time import Time
+
+        try:
+            transform = self.buffer.lookup_transform(target.lstrip("/"), source.lstrip("/"), Time())
+        except self._tf2_ros.TransformException:
+            return None
+        try:
+            return transform_msg_to_matrix(transform)
+        except ConversionError:
+            return None
+
+
+def tf_listener(node):
+    """tf2_ros's listener where tf2_ros is installed, else TfListener: either has frames() and
+    lookup(target, source) -> 4x4 T_target_source or None."""
+    try:
+        import tf2_ros
+    except ImportError:
+        return TfListener(node)
+    return Tf2RosListener(node, tf2_ros)

@@ -2,13 +2,14 @@ import json
 import pathlib
 
 import numpy as np
+import rclpy
 from ament_index_python.packages import get_package_share_directory
 from builtin_interfaces.msg import Time
 from tf2_msgs.msg import TFMessage
 
 from arm_core.camera import look_at
 from arm_ros.conversions.poses import matrix_to_transform_msg, transform_msg_to_matrix
-from arm_ros.tf import TfListener
+from arm_ros.tf import Tf2RosListener, TfListener, tf_listener
 
 
 class _Node:
@@ -76,3 +77,19 @@ def test_tf_message_has_the_wire_type_of_ros2_tf2_msgs():
     )
     hashes = {h["type_name"]: h["hash_string"] for h in description["type_hashes"]}
     assert hashes["geometry_msgs/msg/TransformStamped"] == geometry["type_hashes"][0]["hash_string"]
+
+
+def test_the_listener_is_tf2_ros_where_installed_else_the_chaining_one():
+    rclpy.init()
+    try:
+        node = rclpy.create_node("tf_listener_choice")
+        listener = tf_listener(node)
+        try:
+            import tf2_ros  # noqa: F401
+        except ImportError:
+            assert isinstance(listener, TfListener)
+        else:
+            assert isinstance(listener, Tf2RosListener) and listener.lookup("a", "b") is None
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()

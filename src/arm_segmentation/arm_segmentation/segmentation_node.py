@@ -26,7 +26,7 @@ from arm_interfaces.msg import SegmentedFrame
 from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
 from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
 from arm_ros.goal_activity import declare_goal_pause
-from arm_ros.tf import TfListener, TfPublisher
+from arm_ros.tf import TfPublisher, tf_listener
 from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
 from arm_segmentation.clustering import ClusterParams
@@ -73,6 +73,12 @@ class SegmentationNode(Node):
         )
         self.world_frame = declare(
             self, "world_frame", "world", "With camera_pose_source tf: the gravity-aligned frame (z up) to plan in"
+        )
+        self.camera_frame = declare(
+            self,
+            "camera_frame",
+            "",
+            "The camera's optical frame for /tf (the camera presets set the driver's); '': each depth image's frame_id",
         )
         reliability = declare(
             self,
@@ -153,7 +159,7 @@ class SegmentationNode(Node):
             cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
         )
         self.tracker = CameraPoseTracker() if pose_source == "estimate" else None
-        self.tf_listener = TfListener(self) if pose_source == "tf" else None
+        self.tf_listener = tf_listener(self) if pose_source == "tf" else None
         self.tf = TfPublisher(self)
         self.inputs = ["rgb", "depth", "camera_info"] + (["pose"] if pose_source == "topic" else [])
         self.inputs += ["labels"] if self.use_ground_truth else []
@@ -246,15 +252,16 @@ class SegmentationNode(Node):
         pose = PoseStamped(pose=matrix_to_pose(estimate.T_world_camera))
         pose.header.stamp, pose.header.frame_id = depth.header.stamp, ESTIMATED_WORLD_FRAME
         self.pub_estimated_pose.publish(pose)
-        if depth.header.frame_id:  # the table under the camera's optical frame, which has its own parent
+        camera = self.camera_frame or depth.header.frame_id
+        if camera:  # the table under the camera's optical frame, which has its own parent
             T_camera_table = np.linalg.inv(estimate.T_world_camera)
-            camera = depth.header.frame_id
             self.tf.send([matrix_to_transform_msg(T_camera_table, camera, ESTIMATED_WORLD_FRAME, depth.header.stamp)])
         return pose
 
     def tf_pose(self, frame, depth) -> PoseStamped:
-        """T_world_camera from /tf for a decoded frame (world_frame <- the depth image's frame_id)."""
-        camera = depth.header.frame_id
+        """T_world_camera from /tf for a decoded frame (world_frame <- camera_frame, or the depth image's
+        frame_id)."""
+        camera = self.camera_frame or depth.header.frame_id
         T = self.tf_listener.lookup(self.world_frame, camera) if camera else None
         if T is None:
             known = ", ".join(sorted(self.tf_listener.frames())) or "none"
