@@ -10,6 +10,12 @@ meshes fitted to a new depth frame; see arm_benchmarks.world_execution), or open
 with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
+Robust success: each plan (the controls the robot executed) is executed again, open loop, in
+--robust-worlds perturbed copies of the ground-truth world (arm_benchmarks.world_perturbation: objects
+moved by up to 5 mm and turned by up to 5 degrees, friction x0.5-1.5, masses x0.7-1.3, 0-40 ms of
+latency, joints off by up to 0.5 degrees; the same draws for every method of an episode); the robust
+success is the share of those executions that meet the task (a goal without a plan fails in all).
+
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
 carries the run key (arm_benchmarks.run_key: a digest of the settings, the methods' checkpoints and the source
 of the packages that produce the result); rows with another key are moved to episodes.stale.jsonl, never
@@ -34,7 +40,8 @@ from arm_benchmarks.depth_tracking import DepthTracker
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
 from arm_benchmarks.run_key import run_key
 from arm_benchmarks.stats import json_safe, median
-from arm_benchmarks.world_execution import Reobservation, run_in_world
+from arm_benchmarks.world_execution import HOLD_AFTER_S, Reobservation, run_in_world, task_outcome
+from arm_benchmarks.world_perturbation import WorldPerturbation, draw, execute_perturbed, perturbed_world
 from arm_planner.mppi import STATE_SPEC, MppiConfig
 from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
 from arm_planner.session import ManipulationSession
@@ -175,6 +182,7 @@ def run_method(
     tracker="perfect",
     seed=0,
     reconstruction_settings: dict | None = None,
+    robust_worlds: int = 0,
 ) -> dict:
     started = time.perf_counter()
     row = {"method": method}
@@ -224,6 +232,8 @@ def run_method(
             row["pushed_ungraspable"] = True
         if session.twin is not None:
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
+        if outcome.planned and robust_worlds > 0:
+            row["robust"] = robust_executions(scene, target_index, task, outcome.result, robust_worlds, seed)
     finally:
         session.close()
         world.close()
@@ -232,6 +242,25 @@ def run_method(
             row["infeasible"] = True
         return row | {"success": False, "failure": run.outcome.message, "seconds": time.perf_counter() - started}
     return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
+
+
+def robust_executions(scene, target_index: int, task: str, result, worlds: int, seed: int) -> list[bool]:
+    """Whether the plan's controls meet the task in each of `worlds` perturbed worlds (draws seeded by
+    the episode, so every method meets the same worlds)."""
+    met = []
+    for k in range(worlds):
+        sample = draw(WorldPerturbation(), len(scene.objects), np.random.default_rng([seed, 7919, k]))
+        world = perturbed_world(scene, sample)
+        try:
+            body = world.object_ids[target_index]
+            start = world.data.xipos[body].copy()
+            execute_perturbed(world, result.times_s, result.joint_positions, sample)
+            world.execute(np.array([HOLD_AFTER_S]), result.joint_positions[-1:])
+            ok, _ = task_outcome(task, start, world.data.xipos[body].copy(), GOALS[task], TOLERANCE_M)
+            met.append(bool(ok))
+        finally:
+            world.close()
+    return met
 
 
 RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_reconstruction", "arm_planner", "arm_benchmarks")
@@ -363,7 +392,7 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--node-twin",
         action="store_true",
-        help="both of --merge-other-objects and --rest-creeping (plan_node's cheaper twin until 2026-11-23)",
+        help="both of --merge-other-objects and --rest-creeping (a cheaper twin, for comparisons)",
     )
     parser.add_argument(
         "--settle-s", type=float, default=PlannerConfig.settle_s, help="twin settling before planning, s"
@@ -382,6 +411,9 @@ def main(argv=None) -> int:
         "--rest-creeping", action="store_true", help="creeping objects the robot does not touch put to rest every step"
     )
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
+    parser.add_argument(
+        "--robust-worlds", type=int, default=5, help="perturbed worlds each plan is executed in again (0: none)"
+    )
     parser.add_argument("--fresh", action="store_true", help="ignore earlier results in --out")
     args = parser.parse_args(argv)
     try:
@@ -390,6 +422,8 @@ def main(argv=None) -> int:
         parser.error(f"{error}, or {GROUND_TRUTH}")
     if args.num_paths < 2:
         parser.error("--num-paths must be >= 2")
+    if args.robust_worlds < 0:
+        parser.error("--robust-worlds must be >= 0")
     if not np.isfinite(args.friction) or args.friction <= 0:
         parser.error("--friction must be a positive number")
 
@@ -448,6 +482,7 @@ def main(argv=None) -> int:
         "domain": args.domain,
         "settle_s": args.settle_s,
         "overlap_exclude_m": args.overlap_exclude_m,
+        "robust_worlds": args.robust_worlds,
     }
     if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step or args.sleep_tolerance:
         settings |= {  # only then: keys of earlier runs stay valid
@@ -516,6 +551,7 @@ def main(argv=None) -> int:
                     args.tracker,
                     episode.seed,
                     PAPER_POSTPROCESSING if args.paper_postprocessing else None,
+                    args.robust_worlds,
                 )
                 row["run_key"] = key
                 sink.write(json.dumps(row) + "\n")
@@ -525,7 +561,7 @@ def main(argv=None) -> int:
                 progress.set_postfix(method=method, task=episode.task, ok=row["success"])
     progress.close()
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
-    summary = summarise(rows, args.methods, run_tasks, BINS, len(episodes))
+    summary = summarise(rows, args.methods, run_tasks, BINS, len(episodes), args.robust_worlds)
     summary["settings"] = settings | {"run_key": key}
     (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)

@@ -42,8 +42,16 @@ def infeasible_episodes(rows) -> set:
     return {r["episode"] for r in rows if r["method"] == GROUND_TRUTH and r.get("infeasible")}
 
 
-def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
-    summary = {"methods": {}, "episodes": episodes, "confidence": 0.9}
+def _robust_rate(rows, worlds: int) -> dict:
+    """The share of the perturbed executions that met the task (a row without a plan: none did)."""
+    executions = [ok for r in rows for ok in r.get("robust", [False] * worlds)]
+    k, n = sum(executions), len(executions)
+    low, high = wilson_interval(k, n)
+    return {"rate": rate(k, n), "ci90": [low, high], "n": n}
+
+
+def summarise(rows, methods, tasks, bins, episodes: int, robust_worlds: int = 0) -> dict:
+    summary = {"methods": {}, "episodes": episodes, "confidence": 0.9, "robust_worlds": robust_worlds}
     infeasible = infeasible_episodes(rows)
     judged = any(r["method"] == GROUND_TRUTH for r in rows)
     for method in methods:
@@ -72,6 +80,23 @@ def summarise(rows, methods, tasks, bins, episodes: int) -> dict:
                 "feasible_success": feasible["rate"],
                 "feasible_success_ci90": feasible["ci90"],
                 "feasible_n": feasible["n"],
+            }
+        if robust_worlds:
+            robust = _robust_rate(mine, robust_worlds)
+            robust_task = {t: _robust_rate([r for r in mine if r["task"] == t], robust_worlds) for t in tasks}
+            robust_bin = {
+                bin_label(b): _robust_rate([r for r in mine if r["bin"] == bin_label(b)], robust_worlds) for b in bins
+            }
+            summary["methods"][method] |= {
+                "robust_success": robust["rate"],
+                "robust_success_ci90": robust["ci90"],
+                "robust_n": robust["n"],
+                "robust_by_task": {t: v["rate"] for t, v in robust_task.items()},
+                "robust_by_task_ci90": {t: v["ci90"] for t, v in robust_task.items()},
+                "robust_by_task_n": {t: v["n"] for t, v in robust_task.items()},
+                "robust_by_visibility": {b: v["rate"] for b, v in robust_bin.items()},
+                "robust_by_visibility_ci90": {b: v["ci90"] for b, v in robust_bin.items()},
+                "robust_by_visibility_n": {b: v["n"] for b, v in robust_bin.items()},
             }
         if unavailable:
             summary["methods"][method]["unavailable"] = unavailable
@@ -171,6 +196,40 @@ def _fmt(rate, ci, n) -> str:
     return f"{rate:.2f} [{ci[0]:.2f}, {ci[1]:.2f}] (n={n})"
 
 
+def _robust_lines(summary) -> list[str]:
+    """The report's robust-success tables: per method and task, and per visibility bin."""
+    methods = summary["methods"]
+    first = next(iter(methods.values()))
+    lines = [
+        "",
+        "## Robust success",
+        "",
+        f"Each plan executed again in {summary['robust_worlds']} perturbed worlds (objects moved <= 5 mm and "
+        "turned <= 5 deg, friction x0.5-1.5, masses x0.7-1.3, 0-40 ms latency, joints off <= 0.5 deg): the share of "
+        "those executions that met the task (n: executions).",
+        "",
+        "| method | nominal | robust | " + " | ".join(first["robust_by_task"]) + " |",
+        "|---|---|---|" + "---|" * len(first["robust_by_task"]),
+    ]
+    for name, m in methods.items():
+        cells = [_fmt(m["success"], m["success_ci90"], m["n"])]
+        cells.append(_fmt(m["robust_success"], m["robust_success_ci90"], m["robust_n"]))
+        cells += [
+            _fmt(m["robust_by_task"][t], m["robust_by_task_ci90"][t], m["robust_by_task_n"][t])
+            for t in m["robust_by_task"]
+        ]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += ["", "| visible fraction | " + " | ".join(f"{name} robust" for name in methods) + " |"]
+    lines.append("|---|" + "---|" * len(methods))
+    for b in first["robust_by_visibility"]:
+        cells = [
+            _fmt(m["robust_by_visibility"][b], m["robust_by_visibility_ci90"][b], m["robust_by_visibility_n"][b])
+            for m in methods.values()
+        ]
+        lines.append(f"| {b} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def write_report(summary, out: pathlib.Path) -> None:
     methods = summary["methods"]
     settings = summary.get("settings", {})
@@ -222,6 +281,8 @@ def write_report(summary, out: pathlib.Path) -> None:
             _fmt(m["by_visibility"][b], m["by_visibility_ci90"][b], m["by_visibility_n"][b]) for m in methods.values()
         ]
         lines.append(f"| {b} | " + " | ".join(cells) + " |")
+    if summary.get("robust_worlds"):
+        lines += _robust_lines(summary)
     lines += ["", "## Targets", ""]
     for key, value in summary["targets"].items():
         lines.append(f"- {key}: {value:.3f}" if isinstance(value, float) else f"- {key}: {value}")

@@ -74,3 +74,19 @@ def test_older_ground_truth_rows_are_read_under_the_current_name(tmp_path):
     log = tmp_path / "episodes.jsonl"
     log.write_text(json.dumps({"episode": 0, "method": "ground_truth", "success": True, "run_key": "k"}) + "\n")
     assert list(load_done(log, "k")) == [(0, GROUND_TRUTH)] and GROUND_TRUTH == "ground-truth"
+
+
+def test_robust_success_is_the_share_of_perturbed_executions_and_the_report_shows_it(tmp_path):
+    rows = [
+        {"episode": 0, "method": "arm", "task": "grasp", "bin": "1.0", "success": True, "robust": [True, True, False]},
+        {"episode": 1, "method": "arm", "task": "push", "bin": "1.0", "success": True, "robust": [False] * 3},
+        {"episode": 2, "method": "arm", "task": "push", "bin": "0.1-0.2", "success": False},  # no plan
+    ]
+    summary = summarise(rows, ["arm"], ["grasp", "push"], BINS, 3, robust_worlds=3)
+    arm = summary["methods"]["arm"]
+    assert arm["robust_n"] == 9 and math.isclose(arm["robust_success"], 2 / 9)
+    assert math.isclose(arm["robust_by_task"]["grasp"], 2 / 3) and arm["robust_by_task"]["push"] == 0.0
+    assert arm["robust_by_visibility_n"]["1.0"] == 6 and arm["robust_success_ci90"][0] < 2 / 9
+    summary["settings"] = {}
+    write_report(summary, tmp_path)
+    assert "## Robust success" in (tmp_path / "report.md").read_text()

@@ -140,8 +140,8 @@ class PlannerConfig:
     # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
     # every axis to its goal instead of trying to pick it up.
     push_ungraspable: bool = True
-    # Push: height of the hand's contact point above the object's bottom, m (at most half its height).
-    # 0.012 with the speed cap: 9 of 21 against 10 (seed 0); not kept.
+    # Push: height of the hand's contact point above the object's bottom, m (at most half its height;
+    # docs/experiments.md has the heights measured).
     push_contact_height_m: float = 0.018
     # Push with the open fingers fore and aft of the object (CagePushReward) when it fits between them
     # and the robot's spec gives its finger geometry; otherwise, or when False, with one finger.

@@ -2,7 +2,9 @@
 
 1. Over-segmentation: neighbouring object pixels are separated by a depth discontinuity, a concave
    crease between their surface normals (where touching or stacked objects meet) or a sharp change
-   of chromaticity; connected components of the rest are fragments.
+   of chromaticity; connected components of the rest are fragments. Fragments then grow by colour
+   into the pixels between them (a printed surface is mostly colour edges), never across a depth
+   discontinuity or a concave crease: one box's print does not flood into the box behind it.
 2. Merging: adjacent fragments whose shared boundary is depth-continuous and whose mean
    chromaticities agree are one object (parts of one object meet at creases too). Regions merge
    most similar first (mutual nearest neighbours per round, means and contacts recomputed after
@@ -22,6 +24,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from arm_segmentation.label_stats import label_maximum, label_minimum
+
+# Rings the last flood grows into geometric edge pixels: wider than the band separating_edges marks.
+EDGE_FLOOD_ITERATIONS = 3
 
 
 @dataclass(frozen=True)
@@ -345,7 +350,31 @@ def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: Clust
     thin = widest_disc_m(labels, n, area_m2) < params.thick_fragment_m
     alone = floating | thin
     join &= alone[pairs[:, 0]] | alone[pairs[:, 1]]
-    return _compact(_union(n, pairs[join])[labels], 0)
+    return _compact(_join_to_one_anchor(n, pairs[join], counts[join, 3], alone)[labels], 0)
+
+
+def _join_to_one_anchor(n: int, pairs: np.ndarray, contact: np.ndarray, alone: np.ndarray) -> np.ndarray:
+    """Region of each label 0..n: fragments that cannot be objects on their own (`alone`) that meet
+    join each other, and each such group joins the one other fragment it meets most (`contact` per
+    pair): a strip along the seam of two flush boxes joins one of them and never chains them."""
+    both = alone[pairs[:, 0]] & alone[pairs[:, 1]]
+    group = _union(n, pairs[both])  # alone fragments grouped; every other fragment its own region
+    mixed = pairs[~both]
+    if len(mixed):
+        weight = contact[~both]
+        lonely = np.where(alone[mixed[:, 0]], mixed[:, 0], mixed[:, 1])
+        anchor = np.where(alone[mixed[:, 0]], mixed[:, 1], mixed[:, 0])
+        big = np.int64(n + 1)
+        keys, inverse = np.unique(group[lonely].astype(np.int64) * big + group[anchor], return_inverse=True)
+        totals = np.bincount(inverse, weights=weight)
+        owner, target = keys // big, keys % big
+        order = np.lexsort((-totals, owner))  # per group, the anchor it meets most first
+        first = np.ones(len(order), bool)
+        first[1:] = owner[order][1:] != owner[order][:-1]
+        moved = np.arange(group.max() + 1)
+        moved[owner[order][first]] = target[order][first]
+        group = moved[group]
+    return group
 
 
 def merge_fragments(
@@ -495,13 +524,16 @@ def cluster_instances(
     fragments = _compact(np.where(keep[fragments], fragments, 0), 0)
     if params.seed_textured_regions:
         fragments = seed_textured_regions(fragments, mask & ~geometric, params.small_fragment_px)
+    # floods grow fragments by colour but never across a geometric edge (a depth jump or a concave
+    # crease between two surfaces); the edge pixels then join a side
+    inside = mask & ~geometric
     if params.flood_strict_chroma_threshold > 0:
-        fragments = flood(fragments, mask, chroma, params.flood_iterations, params.flood_strict_chroma_threshold)
+        fragments = flood(fragments, inside, chroma, params.flood_iterations, params.flood_strict_chroma_threshold)
     # With the classifier, a second strict pass (from the grown regions' colours) instead of the loose
     # one: the classifier merges what a loose flood would have claimed, and tells objects apart.
     loose = params.flood_chroma_threshold if scorer is None else params.flood_strict_chroma_threshold
-    fragments = flood(fragments, mask, chroma, params.flood_iterations, loose)
-    leftover, n_left = ndimage.label(mask & (fragments == 0))
+    fragments = flood(fragments, inside, chroma, params.flood_iterations, loose)
+    leftover, n_left = ndimage.label(inside & (fragments == 0))
     if n_left:
         sizes = np.bincount(leftover.ravel(), minlength=n_left + 1)
         keep = sizes >= params.min_fragment_px
@@ -509,6 +541,7 @@ def cluster_instances(
         offset = int(fragments.max())
         fragments = np.where(keep[leftover], leftover + offset, fragments)
         fragments = _compact(fragments, 0)
+    fragments = flood(fragments, mask & geometric, chroma, EDGE_FLOOD_ITERATIONS, np.inf)
     evidence = np.where(object_mask, area_m2, 0.0)
     r = params.geometric_edge_px
     near_edge = cv2.dilate(geometric.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0

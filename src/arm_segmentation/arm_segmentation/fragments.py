@@ -3,7 +3,8 @@
 On real depth a box's top face, a printed patch or a rim often comes out as a separate instance a
 few square centimetres large, and which ones do changes from frame to frame with the sensor's noise.
 An instance whose visible area is under min_instance_area_m2 and whose outline runs mostly
-(min_contact_share) along one larger instance at the same depth is part of it and joins it: a small
+(min_contact_share) along larger instances at its depth is part of one and joins the one it touches
+most (a strip left between two objects where one occludes the other joins the one behind): a small
 object beside another touches it along a side, not all round. A speck under min_speck_area_m2 (too
 small to reconstruct or grasp: a corner of a face cut off by an edge) joins the larger instance it
 touches most at its depth, and is dropped when it touches none.
@@ -18,7 +19,7 @@ import numpy as np
 @dataclass(frozen=True)
 class FragmentParams:
     min_instance_area_m2: float = 0.0015  # 15 cm^2, a 4 x 4 cm patch seen face-on
-    min_contact_share: float = 0.6  # of the fragment's outline pixel pairs, along the instance it joins
+    min_contact_share: float = 0.6  # of the fragment's outline pixel pairs, along larger instances
     min_speck_area_m2: float = 0.0002  # 2 cm^2
     contact_depth_m: float = 0.015  # neighbouring pixels of two instances this close in depth touch
     contact_reach_px: int = 2  # pixels up to this far apart along a row or a column are neighbours
@@ -78,7 +79,7 @@ def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, par
     for i in np.flatnonzero(fragment):
         share = np.where(areas > areas[i], touching[i], 0) / max(outline[i], 1)
         speck = areas[i] < params.min_speck_area_m2
-        if share.max() >= params.min_contact_share or (speck and share.max() > 0):
+        if share.sum() >= params.min_contact_share or (speck and share.max() > 0):
             owner[i] = int(np.argmax(share))
         elif speck:
             owner[i] = 0

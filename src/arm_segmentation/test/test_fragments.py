@@ -47,3 +47,15 @@ def test_no_fragment_leaves_labels_unchanged():
     labels[labels == 5] = 0
     out = absorb_fragments(labels, depth, K, PARAMS)
     assert np.array_equal(out, labels)
+
+
+def test_a_strip_between_two_objects_joins_the_one_it_touches_most():
+    """A 6 x 40 px strip at 1 m between two boxes at its depth, along 40 px of one and 25 px of the
+    other: neither alone borders most of its outline, both together do."""
+    labels = np.zeros((480, 640), np.uint16)
+    depth = np.full((480, 640), 1.5, np.float32)
+    labels[100:300, 100:200], depth[100:300, 100:200] = 1, 1.0
+    labels[100:140, 200:206], depth[100:140, 200:206] = 2, 1.0
+    labels[100:125, 206:300], depth[100:125, 206:300] = 3, 1.0
+    out = absorb_fragments(labels, depth, K, PARAMS)
+    assert np.all(out[100:140, 200:206] == out[150, 150]) and len(np.unique(out[out > 0])) == 2
