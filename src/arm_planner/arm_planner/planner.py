@@ -307,7 +307,7 @@ class Planner:
                 pushed = False
             else:
                 pushed = request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable
-            if pushed:
+            if pushed:  # a rearrange that became a push is a push
                 reward = self._push_reward(common, target_id, displacement, geometry)
             elif request.task == TASK_GRASP and request.resume_state is None and reward.ungraspable:
                 raise TaskInfeasible(
@@ -319,6 +319,14 @@ class Planner:
             reward = self._push_reward(common, target_id, displacement, geometry)
         else:
             raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
+        if isinstance(reward, PushReward):
+            reward.push_speed_m_s = self.config.push_hand_speed_m_s
+            planned_as = TASK_PUSH
+        else:
+            reward.carry_speed_m_s = self.config.carry_hand_speed_m_s if request.task == TASK_REARRANGE else 0.0
+            reward.lift_to_meet_m = GRASP_LIFT_M if request.task == TASK_GRASP else 0.0
+            planned_as = request.task
+        reward.step_budget = int(self.config.task_steps.get(planned_as) or self.config.mppi.steps)
         if request.start_com_world is not None:
             reward.start_com = np.asarray(request.start_com_world, dtype=np.float64)
             reward.goal = reward.start_com + displacement
@@ -387,15 +395,11 @@ class Planner:
         basis[:, self.robot.arm_actuators] = arm_rows
         return basis
 
-    def evaluate(self, reward, task: str, state: np.ndarray, tolerance_m: float):
+    @staticmethod
+    def evaluate(reward, state: np.ndarray, tolerance_m: float):
         """(met, error_m) of the task at a twin state."""
         _, _, com, _ = reward.poses(state[None])
-        com = com[0]
-        if task == TASK_GRASP:
-            lift = com[2] - reward.start_com[2]
-            return lift >= GRASP_LIFT_M, max(0.0, GRASP_LIFT_M - lift)
-        error = float(np.linalg.norm(reward.goal - com))
-        return error <= tolerance_m, error
+        return reward.met(com[0], tolerance_m)
 
     def plan(
         self,
@@ -437,8 +441,7 @@ class Planner:
         )
         met_streak, met, error, held = 0, False, float("inf"), False
         message = "step budget used"
-        planned_as = TASK_PUSH if isinstance(reward, PushReward) else request.task  # a rearrange may be a push
-        budget = int(cfg.task_steps.get(planned_as) or cfg.mppi.steps)
+        budget = reward.step_budget
         for step in range(budget):
             if should_stop is not None and should_stop():
                 message = "stopped"
@@ -451,11 +454,8 @@ class Planner:
             gripper = reward.gripper_command(robot.spec.gripper_open, robot.spec.gripper_closed)
             fixed = {int(robot.gripper_actuator): gripper}
             jac = self.tcp_jacobian(data)
-            speed_cap = None
-            if cfg.push_hand_speed_m_s > 0 and request.task == TASK_PUSH and reward.near_contact:
-                speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cfg.push_hand_speed_m_s)
-            if cfg.carry_hand_speed_m_s > 0 and request.task == TASK_REARRANGE and reward.state == "grasped":
-                speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cfg.carry_hand_speed_m_s)
+            cap_m_s = reward.hand_speed_cap_m_s()
+            speed_cap = linear_speed_cap(jac[:3], robot.arm_actuators, cap_m_s) if cap_m_s > 0 else None
             result = self.mppi.step(
                 state, ctrl, reward, self.noise_basis(data, jac), fixed, num_paths=paths, rate_filter=speed_cap
             )
@@ -483,10 +483,9 @@ class Planner:
             if stream is not None:
                 stream(ctrl[robot.actuators])
             self.mppi.shift()
-            met, error = self.evaluate(reward, request.task, executed, request.tolerance_m)
-            holding = request.task == TASK_PUSH or reward.state == "grasped"
+            met, error = self.evaluate(reward, executed, request.tolerance_m)
             close = reward.error(executed) <= cfg.done_goal_distance_m
-            met_streak = met_streak + 1 if (met and holding and close) else 0
+            met_streak = met_streak + 1 if (met and reward.holds_goal() and close) else 0
             if feedback is not None:
                 feedback(step + 1, budget, states[-1], error)
             if cfg.done_hold_steps and met_streak >= cfg.done_hold_steps:

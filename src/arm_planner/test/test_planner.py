@@ -1,5 +1,7 @@
 """Planner behaviour on the small gantry robot: real MPPI over real rollouts, seconds per test."""
 
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
@@ -150,3 +152,26 @@ def test_planner_continues_from_an_observed_state():
     assert abs(seen_x[11] - (geometry.com_world[0] + 0.03)) < 0.002, "the next step starts from the observation"
     assert result.success, result.message
     planner.close()
+
+
+def test_a_rearrange_that_becomes_a_push_is_planned_as_a_push():
+    """A target wider than the open fingers every way is pushed to a rearrange's goal: the push's step
+    budget and speed cap, not the rearrange's."""
+    _, state, geometry = _setup(steps=2)
+    fingers = {
+        "finger_gap_open_m": 0.06,
+        "fingertip_to_palm_m": 0.06,
+        "finger_thickness_m": 0.01,
+        "finger_width_m": 0.016,
+    }
+    config = PlannerConfig(mppi=MppiConfig(steps=2, nthread=1), task_steps={"push": 3, "rearrange": 7})
+    planner = Planner(gantry_model(), dataclasses.replace(GANTRY_SPEC, **fingers), config)
+    wide = trimesh.creation.box(extents=(0.2, 0.2, 0.06))
+    wide.apply_translation(geometry.com_world)
+    geometry = TargetGeometry(geometry.com_world, wide.vertices, 0.0)
+    result = planner.plan(state, PlanRequest("rearrange", "object_0", np.array([0.1, 0.1, 0.0])), geometry)
+    reward = planner._last_reward
+    planner.close()
+    assert reward.__class__.__name__.endswith("PushReward") and reward.step_budget == 3 == len(result.times_s)
+    assert reward.push_speed_m_s == planner.config.push_hand_speed_m_s > 0
+    assert reward.hand_speed_cap_m_s() == (reward.push_speed_m_s if reward.near_contact else 0.0)

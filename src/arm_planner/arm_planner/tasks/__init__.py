@@ -5,6 +5,10 @@ machine that advances only on the executed trajectory, as in the paper's appendi
 Parameters": ungrasped -> grasping (gripper closes for `close_steps`) -> grasped. `base` holds what
 every task shares (the target's geometry, the weights, kinematics from the state); `grasp` the grasp
 and the rearrange (a grasp carried to a goal); `push` the one-finger and the caging push.
+
+Each task also owns what the planning loop asks of it (TaskReward): its step budget, the hand's speed
+cap at each step, whether it holds its goal (so the loop may stop early) and whether it is met. The
+loop never asks for a task's name; a rearrange of a target no grasp holds is planned as a push.
 """
 
 TASK_GRASP = "grasp"

@@ -113,6 +113,23 @@ class TaskReward:
     weights: RewardWeights = field(default_factory=RewardWeights)
     state: str = "ungrasped"
     step_count: int = 0
+    # MPPI steps the task may take (the planner sets it from PlannerConfig.task_steps).
+    step_budget: int = 200
+
+    # The planner's loop asks the task, never its name: its step budget, the hand's speed cap now,
+    # whether its goal can be held now (the loop stops once it held a while) and whether it is met.
+    def hand_speed_cap_m_s(self) -> float:
+        """The hand's top speed for the next step, m/s (0: no cap)."""
+        return 0.0
+
+    def holds_goal(self) -> bool:
+        """Whether the task is in a state that keeps its goal once reached (an early stop may end it)."""
+        return True
+
+    def met(self, com_world: np.ndarray, tolerance_m: float) -> tuple[bool, float]:
+        """(met, error m) with the target's centre of mass at com_world: within tolerance of the goal."""
+        error = float(np.linalg.norm(self.goal - com_world))
+        return error <= tolerance_m, error
 
     def poses(self, states: np.ndarray):
         """(hand position, hand rotation, target centre, target rotation) per state, world frame."""

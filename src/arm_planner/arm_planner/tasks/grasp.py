@@ -56,6 +56,10 @@ class GraspReward(TaskReward):
     # `carry_clearance_m` (objects within its radius + `carry_corridor_margin_m` of the straight path),
     # up to `max_carry_height_m`.
     carry_height_m: float = 0.0
+    # Rearrange: the hand's top speed while it holds the object, m/s (0: no cap).
+    carry_speed_m_s: float = 0.0
+    # Grasp: met once the target is lifted this far, m (0: a rearrange, met within tolerance of its goal).
+    lift_to_meet_m: float = 0.0
     carry_clearance_m: float = 0.015
     carry_corridor_margin_m: float = 0.02
     max_carry_height_m: float = 0.10
@@ -300,6 +304,18 @@ class GraspReward(TaskReward):
             timed_out = self.step_count - self._grasped_since >= self.lift_timeout_steps
             self._advance_carry_phase(target_pos[0], lift_over=timed_out)
         return self.state
+
+    def hand_speed_cap_m_s(self) -> float:
+        return self.carry_speed_m_s if self.state == "grasped" else 0.0
+
+    def holds_goal(self) -> bool:
+        return self.state == "grasped"
+
+    def met(self, com_world: np.ndarray, tolerance_m: float) -> tuple[bool, float]:
+        if self.lift_to_meet_m <= 0:
+            return super().met(com_world, tolerance_m)
+        lift = float(com_world[2] - self.start_com[2])
+        return lift >= self.lift_to_meet_m, max(0.0, self.lift_to_meet_m - lift)
 
     def error(self, state: np.ndarray) -> float:
         _, _, target_pos, _ = self.poses(state[None])

@@ -72,6 +72,8 @@ class PushReward(TaskReward):
     state: str = "approaching"
     # Pushing, or the hand within disengage_distance_m of its contact point (set by update()).
     near_contact: bool = False
+    # The hand's top speed while pushing or near its contact point, m/s (0: no cap).
+    push_speed_m_s: float = 0.0
 
     def __post_init__(self):
         g = self.geometry
@@ -256,6 +258,9 @@ class PushReward(TaskReward):
             self.state = "approaching"
         self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
         return self.state
+
+    def hand_speed_cap_m_s(self) -> float:
+        return self.push_speed_m_s if self.near_contact else 0.0
 
     def error(self, state: np.ndarray) -> float:
         _, _, target_pos, _ = self.poses(state[None])
