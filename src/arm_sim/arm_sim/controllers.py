@@ -222,9 +222,13 @@ class SimControllers:
     def _finger_m(self) -> float:
         return float(self.session.world.joint_positions()[-1])
 
-    def _gripper_result(self, goal: _GripperGoal, stalled: bool, reached: bool) -> GripperCommand.Result:
+    def _gripper_result(self, goal: _GripperGoal, stalled, reached) -> GripperCommand.Result:
+        """Python bool and float fields: a numpy value would abort the process when serialized."""
         return GripperCommand.Result(
-            position=self._finger_m(), effort=self.session.finger_effort_n(), stalled=stalled, reached_goal=reached
+            position=float(self._finger_m()),
+            effort=float(self.session.finger_effort_n()),
+            stalled=bool(stalled),
+            reached_goal=bool(reached),
         )
 
     def _tick_gripper(self, now_s: float) -> None:
@@ -238,10 +242,10 @@ class SimControllers:
             goal.handle.canceled()
             goal.done.set_result(self._gripper_result(goal, stalled=False, reached=False))
             return
-        reached = abs(position - goal.target_m) <= GRIPPER_GOAL_TOLERANCE_M
+        reached = bool(abs(position - goal.target_m) <= GRIPPER_GOAL_TOLERANCE_M)
         span_s = goal.history[-1][0] - goal.history[0][0]
-        moved = np.ptp([p for _, p in goal.history])
-        stalled = not reached and span_s >= STALL_TIMEOUT_S - 1e-9 and moved < STALL_MOTION_M
+        moved = float(np.ptp([p for _, p in goal.history]))
+        stalled = bool(not reached and span_s >= STALL_TIMEOUT_S - 1e-9 and moved < STALL_MOTION_M)
         if reached or stalled:
             self.gripper = None
             goal.handle.succeed()
@@ -249,7 +253,7 @@ class SimControllers:
         elif now_s >= goal.next_feedback_s:
             goal.next_feedback_s = now_s + FEEDBACK_PERIOD_S
             goal.handle.publish_feedback(
-                GripperCommand.Feedback(position=position, effort=self.session.finger_effort_n())
+                GripperCommand.Feedback(position=float(position), effort=float(self.session.finger_effort_n()))
             )
 
     def tick(self) -> None:

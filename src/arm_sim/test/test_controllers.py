@@ -122,3 +122,14 @@ def test_the_gripper_opens_to_its_goal_and_stalls_on_an_object_or_closes(sim):
     result = _wait(_wait(gripper.send_goal_async(goal)).get_result_async()).result
     assert result.reached_goal or result.stalled
     assert session.world.joint_positions()[-1] < robot.GRIPPER_OPEN_M - 0.01
+
+
+def test_a_gripper_held_short_of_its_goal_reports_a_stall(sim, monkeypatch):
+    """Fingers closing on an object stop short of the set point: the goal ends stalled, and the
+    result goes out (a numpy value in it once aborted the node when serialized)."""
+    _, controllers, _, gripper = sim
+    monkeypatch.setattr(controllers, "_finger_m", lambda: 0.02)
+    goal = GripperCommand.Goal()
+    goal.command.position = 0.0
+    result = _wait(_wait(gripper.send_goal_async(goal)).get_result_async()).result
+    assert result.stalled and not result.reached_goal and result.position == 0.02
