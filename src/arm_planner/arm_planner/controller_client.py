@@ -46,7 +46,8 @@ class ControllerClient:
         self._timers = []  # gripper set points not sent yet
         self._gripper_now_m: float | None = None  # the last set point sent
         self._arm_goal = None  # handle of the last accepted arm goal
-        self.gripper_words = "no gripper goal"
+        self._gripper_sent = 0  # gripper goals sent
+        self._gripper_words: dict[int, str] = {}  # gripper goal number -> how it ended
 
     def missing_servers(self, timeout_s: float) -> list[str]:
         """The controllers' action servers not available within timeout_s (s)."""
@@ -94,21 +95,36 @@ class ControllerClient:
 
     def _send_gripper(self, position_m: float) -> None:
         self._gripper_now_m = position_m
+        with self._done:
+            self._gripper_sent += 1
+            number = self._gripper_sent
         goal = GripperCommand.Goal()
         goal.command.position, goal.command.max_effort = float(position_m), self.max_effort_n
-        self.gripper.send_goal_async(goal).add_done_callback(self._on_gripper_accepted)
+        self.gripper.send_goal_async(goal).add_done_callback(lambda future: self._on_gripper_accepted(number, future))
 
-    def _on_gripper_accepted(self, future) -> None:
+    def _on_gripper_accepted(self, number: int, future) -> None:
         handle = future.result()
         if not handle.accepted:
-            self.gripper_words = "gripper goal rejected"
+            self._record_gripper(number, f"{self.gripper_action} rejected the gripper goal")
             return
-        handle.get_result_async().add_done_callback(self._on_gripper_result)
+        handle.get_result_async().add_done_callback(lambda result: self._on_gripper_result(number, result))
 
-    def _on_gripper_result(self, future) -> None:
+    def _on_gripper_result(self, number: int, future) -> None:
         result = future.result().result
         state = "reached its goal" if result.reached_goal else "stalled" if result.stalled else "stopped"
-        self.gripper_words = f"gripper {state} at {result.position * 1e3:.1f} mm, {result.effort:.1f} N"
+        self._record_gripper(number, f"gripper {state} at {result.position * 1e3:.1f} mm, {result.effort:.1f} N")
+
+    def _record_gripper(self, number: int, words: str) -> None:
+        with self._done:
+            if number >= max(self._gripper_words, default=0):  # a preempted goal's late word is dropped
+                self._gripper_words = {number: words}
+            self._done.notify_all()
+
+    def _gripper_outcome(self) -> str | None:
+        """How the last gripper goal ended; None while it runs. Call with the lock held."""
+        if self._gripper_sent == 0:
+            return "no gripper goal"
+        return self._gripper_words.get(self._gripper_sent)
 
     def _on_arm_accepted(self, sequence: int, future) -> None:
         handle = future.result()
@@ -131,18 +147,22 @@ class ControllerClient:
             self._done.notify_all()
 
     def wait(self, margin_s: float, should_stop=lambda: False) -> ExecutionReport:
-        """The last trajectory's result once the controller reports it; EXECUTION_TIMED_OUT when it has
-        not `margin_s` after the trajectory's end on the node's clock."""
+        """The last trajectory's result once the controller reports it, with the last gripper goal's
+        (waited for until the same deadline); EXECUTION_TIMED_OUT when the arm controller has not
+        reported `margin_s` after the trajectory's end on the node's clock."""
         clock = self.node.get_clock()
         with self._done:
             sequence, end_ns = self._sequence, self._end_ns
         deadline_ns = end_ns + Duration(seconds=margin_s).nanoseconds
         while True:
             with self._done:
-                if sequence in self._results:
+                late = clock.now().nanoseconds > deadline_ns or should_stop()
+                gripper = self._gripper_outcome()
+                if sequence in self._results and (gripper is not None or late):
                     code, words = self._results[sequence]
-                    return ExecutionReport(code, f"{words}; {self.gripper_words}", end_ns)
-                if clock.now().nanoseconds > deadline_ns or should_stop():
+                    gripper = gripper or "the last gripper goal gave no result in time"
+                    return ExecutionReport(code, f"{words}; {gripper}", end_ns)
+                if late:
                     return ExecutionReport(
                         Manipulate.Result.EXECUTION_TIMED_OUT,
                         f"{self.arm_action} gave no result within {margin_s} s of the trajectory's end",

@@ -84,10 +84,19 @@ def observed_displacement(
 ) -> np.ndarray | None:
     """How far the target `target_id` of `previous` moved by `newer` (world, m): its centre there is the
     object nearest either where it was or where the task should have put it (old centre + expected_m),
-    within max_distance_m; None when none is."""
+    within max_distance_m, and nearer those than any other object of `previous` (a neighbour that did
+    not move is not the target); None when there is no such object (a target held in the hand and
+    hidden by it, or gone from view)."""
     old = previous.centre_world(target_id)
     if old is None:
         return None
-    goal = old + np.asarray(expected_m, dtype=np.float64)
-    found = nearest_object(newer, np.stack([old, goal]), max_distance_m)
-    return None if found is None else np.asarray(found.T_world_object, dtype=np.float64)[:3, 3] - old
+    places = np.stack([old, old + np.asarray(expected_m, dtype=np.float64)])
+    found = nearest_object(newer, places, max_distance_m)
+    if found is None:
+        return None
+    centre = np.asarray(found.T_world_object, dtype=np.float64)[:3, 3]
+    others = [np.asarray(o.T_world_object)[:3, 3] for o in previous.objects if o.id != target_id]
+    to_target = np.linalg.norm(places - centre, axis=1).min()
+    if others and np.linalg.norm(np.array(others) - centre, axis=1).min() <= to_target:
+        return None
+    return centre - old

@@ -47,3 +47,11 @@ def test_observed_displacement_finds_the_target_where_it_was_or_where_the_task_p
     assert np.allclose(observed_displacement(before, 3, missed, (0.0, 0.21, 0.0), 0.05), (0.01, 0.0, 0.0))
     assert observed_displacement(before, 3, _scene(4, {1: (0.3, 0.0, 0.05)}), (0.0, 0.21, 0.0), 0.05) is None
     assert observed_displacement(before, 9, pushed, (0.0, 0.0, 0.0), 0.05) is None
+
+
+def test_a_neighbour_that_did_not_move_is_not_taken_for_the_target():
+    before = _scene(1, {3: (0.1, 0.0, 0.05), 5: (0.16, 0.0, 0.05)})
+    lifted_out_of_view = _scene(2, {1: (0.16, 0.0, 0.05)})  # only the neighbour is seen
+    assert observed_displacement(before, 3, lifted_out_of_view, (0.0, 0.0, 0.1), 0.15) is None
+    lifted = _scene(3, {1: (0.16, 0.0, 0.05), 2: (0.1, 0.0, 0.15)})
+    assert np.allclose(observed_displacement(before, 3, lifted, (0.0, 0.0, 0.1), 0.15), (0.0, 0.0, 0.1))
