@@ -5,6 +5,7 @@ flip with the CPU's floating-point rounding; a behaviour that is robust holds ac
 
 import numpy as np
 
+from arm_benchmarks.world_perturbation import moved_poses
 from arm_sim.scenes import Scene
 
 RUNS, MAJORITY = 3, 2
@@ -16,16 +17,10 @@ def perturbed_scene(scene: Scene, run: int) -> Scene:
     if run == 0:
         return scene
     rng = np.random.default_rng(run)
-    poses = []
-    for placed in scene.objects:
-        angle = rng.uniform(-TURN_RAD, TURN_RAD)
-        turn = np.eye(4)
-        turn[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-        T = placed.T_world_object.copy()
-        T[:3, :3] = turn[:3, :3] @ T[:3, :3]
-        T[:2, 3] += rng.uniform(-SHIFT_M, SHIFT_M, 2)
-        poses.append(T)
-    return scene.with_poses(poses)
+    draws = [(rng.uniform(-TURN_RAD, TURN_RAD), rng.uniform(-SHIFT_M, SHIFT_M, 2)) for _ in scene.objects]
+    turns = np.array([angle for angle, _ in draws])
+    shifts = np.array([shift for _, shift in draws]).reshape(-1, 2)
+    return scene.with_poses(moved_poses([placed.T_world_object for placed in scene.objects], shifts, turns))
 
 
 def holds_in_most(attempt, runs: int = RUNS, majority: int = MAJORITY) -> tuple[bool, list]:
