@@ -13,7 +13,7 @@ from robustness_nodes import run_against
 from arm_benchmarks.robustness.cases.planner import run_planner_bad_inputs
 
 # the trajectories go out on the topic, where the harness inspects them
-FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": True, "controller_interface": "topic"}
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execution": "stream", "controller_interface": "topic"}
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from ros_helpers import require_built, require_reconstruction_params
 
 LOAD_S = 20.0
 CAMERA_HZ = 30.0
-FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execute": False}
+FAST_PLANNER = {"steps": 5, "settle_s": 0.0, "nthread": 1, "execution": "plan_only"}
 
 
 @pytest.fixture(scope="module")

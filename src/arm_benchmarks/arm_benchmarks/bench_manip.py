@@ -42,8 +42,9 @@ from arm_benchmarks.run_key import run_key
 from arm_benchmarks.stats import json_safe, median
 from arm_benchmarks.world_execution import HOLD_AFTER_S, Reobservation, run_in_world, task_outcome
 from arm_benchmarks.world_perturbation import WorldPerturbation, draw, execute_perturbed, perturbed_world
-from arm_planner.mppi import STATE_SPEC, MppiConfig
-from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig
+from arm_core.settings import add_arguments, changed, from_arguments, settings_of
+from arm_planner.mppi import STATE_SPEC
+from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks import TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
 from arm_planner.tasks.grasp import GraspReward
@@ -56,7 +57,7 @@ from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.depth_noise import DepthNoise
 from arm_sim.objects import object_pool
 from arm_sim.scenes import task_scene
-from arm_sim.world import SLIDING_FRICTION, SimWorld
+from arm_sim.world import SimWorld
 
 GOALS = {
     TASK_GRASP: (0.0, 0.0, 0.0),
@@ -263,6 +264,10 @@ def robust_executions(scene, target_index: int, task: str, result, worlds: int, 
     return met
 
 
+# The planner as benchmarked: a fixed path count per step (real-time adaptation would tie the
+# outcomes to the machine's load).
+BENCH_PLANNER = PlannerConfig(realtime_factor=0.0)
+
 RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_reconstruction", "arm_planner", "arm_benchmarks")
 
 
@@ -319,10 +324,6 @@ def main(argv=None) -> int:
         "--bins", nargs="+", default=labels, choices=labels, metavar="BIN", help="visible-fraction bins to run"
     )
     parser.add_argument("--target-scale", type=float, default=0.8, help="scale of the 8 cm nominal targets")
-    parser.add_argument("--steps", type=int, default=200, help="MPPI steps per plan (paper: 200)")
-    for task, steps in DEFAULT_TASK_STEPS.items():
-        parser.add_argument(f"--{task}-steps", type=int, default=steps, help=f"{task} step budget (0: --steps)")
-    parser.add_argument("--close-steps", type=int, default=75, help="gripper closing steps (paper: 75)")
     parser.add_argument("--twin-timestep", type=float, default=0.01, help="twin physics step, s")
     parser.add_argument(
         "--observe-period",
@@ -336,79 +337,14 @@ def main(argv=None) -> int:
         default="perfect",
         help="closed loop: object poses from the true motion (perfect) or fitted to new depth frames (depth)",
     )
-    parser.add_argument("--nthread", type=int, default=2)
-    parser.add_argument("--num-paths", type=int, default=25, help="MPPI paths per step (paper: 25)")
-    parser.add_argument(
-        "--horizon", type=int, default=MppiConfig.horizon, help="MPPI horizon, control steps (paper: 5)"
-    )
-    parser.add_argument(
-        "--push-hand-speed",
-        type=float,
-        default=PlannerConfig.push_hand_speed_m_s,
-        help="push: the hand's top speed near and at the object, m/s (0: no cap)",
-    )
-    parser.add_argument(
-        "--push-contact-height",
-        type=float,
-        default=PlannerConfig.push_contact_height_m,
-        help="push: the hand's contact height above the object's bottom, m",
-    )
-    parser.add_argument(
-        "--push-cage",
-        action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.push_cage,
-        help="push with the open fingers fore and aft of objects that fit between them (else one finger)",
-    )
-    parser.add_argument(
-        "--grasp-site-search",
-        action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.grasp_site_search,
-        help="grasp where the target's material lies between the fingers when its centre of mass has none there",
-    )
     parser.add_argument(
         "--paper-postprocessing",
         action="store_true",
         help="reconstructed meshes without the stable base, joined parts, snapping to the depth and solids of "
         "revolution (closer to the paper's post-processing: intersections removed, convex parts)",
     )
-    parser.add_argument(
-        "--hand-clearance",
-        action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.hand_clearance,
-        help="grasp: coming down, keep the open fingers out of the target and the palm off other objects",
-    )
-    parser.add_argument(
-        "--push-ungraspable",
-        action=argparse.BooleanOptionalAction,
-        default=PlannerConfig.push_ungraspable,
-        help="rearrange: push a target that is wider than the open fingers along every axis",
-    )
-    parser.add_argument(
-        "--friction",
-        type=float,
-        default=SLIDING_FRICTION,
-        help="object-table sliding friction of the world the plans run in and of the twin",
-    )
-    parser.add_argument(
-        "--node-twin",
-        action="store_true",
-        help="both of --merge-other-objects and --rest-creeping (a cheaper twin, for comparisons)",
-    )
-    parser.add_argument(
-        "--settle-s", type=float, default=PlannerConfig.settle_s, help="twin settling before planning, s"
-    )
-    parser.add_argument(
-        "--overlap-exclude-m",
-        type=float,
-        default=PlannerConfig.twin_overlap_exclude_m,
-        help="objects overlapping deeper than this as built do not collide in the twin, m (inf: all collide)",
-    )
-    parser.add_argument("--sleep-tolerance", type=float, default=0.0, help="twin sleep tolerance, m/s (0: MuJoCo's)")
-    parser.add_argument(
-        "--merge-other-objects", action="store_true", help="objects but the target one convex hull each"
-    )
-    parser.add_argument(
-        "--rest-creeping", action="store_true", help="creeping objects the robot does not touch put to rest every step"
+    planner_flags = add_arguments(
+        parser, BENCH_PLANNER, [s.name for s in settings_of(BENCH_PLANNER) if s.name != "seed"]
     )
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
     parser.add_argument(
@@ -420,12 +356,10 @@ def main(argv=None) -> int:
         args.methods = [benchmark_method(m) for m in args.methods]
     except ValueError as error:
         parser.error(f"{error}, or {GROUND_TRUTH}")
-    if args.num_paths < 2:
-        parser.error("--num-paths must be >= 2")
-    if args.robust_worlds < 0:
-        parser.error("--robust-worlds must be >= 0")
-    if not np.isfinite(args.friction) or args.friction <= 0:
-        parser.error("--friction must be a positive number")
+    try:
+        config = from_arguments(BENCH_PLANNER, args, planner_flags)
+    except ValueError as error:
+        parser.error(str(error))
 
     torch.set_num_threads(2)
     out = pathlib.Path(args.out)
@@ -444,26 +378,6 @@ def main(argv=None) -> int:
     if args.only_tasks:
         run_tasks = [t for t in args.tasks if t in args.only_tasks]
         episodes = [e for e in episodes if e.task in run_tasks]
-    config = PlannerConfig()
-    config.mppi.steps = args.steps
-    config.mppi.nthread = args.nthread
-    config.mppi.num_paths = args.num_paths
-    config.mppi.horizon = args.horizon
-    config.push_hand_speed_m_s = args.push_hand_speed
-    config.push_contact_height_m = args.push_contact_height
-    config.push_cage = args.push_cage
-    config.grasp_site_search = args.grasp_site_search
-    config.push_ungraspable = args.push_ungraspable
-    config.hand_clearance = args.hand_clearance
-    config.object_friction = args.friction
-    config.merge_other_objects = args.node_twin or args.merge_other_objects
-    config.rest_creeping_every_step = args.node_twin or args.rest_creeping
-    config.sleep_tolerance = args.sleep_tolerance
-    config.settle_s = args.settle_s
-    config.twin_overlap_exclude_m = args.overlap_exclude_m
-    config.close_steps = args.close_steps
-    budgets = {task: getattr(args, f"{task}_steps") for task in DEFAULT_TASK_STEPS}
-    config.task_steps = {task: steps for task, steps in budgets.items() if steps}
     period_steps = int(round(args.observe_period / config.mppi.control_dt_s))
     settings = {
         "episodes": n,
@@ -472,36 +386,16 @@ def main(argv=None) -> int:
         "tasks": args.tasks,
         "bins": args.bins,
         "target_scale": args.target_scale,
-        "steps": args.steps,
-        "task_steps": config.task_steps,
-        "close_steps": args.close_steps,
         "twin_timestep_s": args.twin_timestep,
         "observe_period_s": args.observe_period,
         "objects": args.objects or "procedural heldout categories",
-        "nthread": args.nthread,
         "domain": args.domain,
-        "settle_s": args.settle_s,
-        "overlap_exclude_m": args.overlap_exclude_m,
         "robust_worlds": args.robust_worlds,
+        "planner": changed(config, BENCH_PLANNER),  # the planner's settings that are not BENCH_PLANNER's
     }
-    if args.num_paths != 25 or config.merge_other_objects or config.rest_creeping_every_step or args.sleep_tolerance:
-        settings |= {  # only then: keys of earlier runs stay valid
-            "num_paths": args.num_paths,
-            "merge_other_objects": config.merge_other_objects,
-            "rest_creeping": config.rest_creeping_every_step,
-            "sleep_tolerance": args.sleep_tolerance,
-        }
-    settings |= {  # only when not the default: keys of earlier runs stay valid
+    settings |= {  # only when not the default
         name: value
         for name, value, default in (
-            ("horizon", args.horizon, MppiConfig.horizon),
-            ("push_hand_speed_m_s", args.push_hand_speed, PlannerConfig.push_hand_speed_m_s),
-            ("push_contact_height_m", args.push_contact_height, PlannerConfig.push_contact_height_m),
-            ("friction", args.friction, SLIDING_FRICTION),
-            ("push_cage", args.push_cage, PlannerConfig.push_cage),
-            ("grasp_site_search", args.grasp_site_search, PlannerConfig.grasp_site_search),
-            ("push_ungraspable", args.push_ungraspable, PlannerConfig.push_ungraspable),
-            ("hand_clearance", args.hand_clearance, PlannerConfig.hand_clearance),
             ("only_tasks", run_tasks, args.tasks),
             ("tracker", args.tracker, "perfect"),
             ("paper_postprocessing", args.paper_postprocessing, False),
@@ -525,7 +419,9 @@ def main(argv=None) -> int:
                 scene, target_index, frame, target_name = build_scene(
                     episode, BINS, target_pool, distractor_pool, args.target_scale, domain=args.domain
                 )
-                scene.friction = args.friction  # the table the plans are executed on (built and viewed at rest)
+                scene.friction = (
+                    config.object_friction
+                )  # the table the plans are executed on (built and viewed at rest)
                 base |= {
                     "target": target_name,
                     "visible_fraction": float(frame.visible_fraction[target_index]),

@@ -105,7 +105,7 @@ def phase_bad_input_reconstruction(args, work: pathlib.Path) -> dict:
 
 
 def phase_bad_input_planner(args, work: pathlib.Path) -> dict:
-    return _with_node("planner", work, run_planner_bad_inputs, params={**FAST_PLANNER, "execute": True})
+    return _with_node("planner", work, run_planner_bad_inputs, params={**FAST_PLANNER, "execution": "stream"})
 
 
 def phase_bad_input_sim(args, work: pathlib.Path) -> dict:
@@ -204,7 +204,7 @@ def phase_load_fault(args, work: pathlib.Path) -> dict:
         return {"skipped": "no reconstruction checkpoint"}
     bag = work / "camera_bag"
     write_camera_bag(bag, render_frames(6, args.width, args.height, seed=3, count=3), args.camera_hz)
-    graph = start_graph(work, bag, params, planner_params={**FAST_PLANNER, "execute": False})
+    graph = start_graph(work, bag, params, planner_params={**FAST_PLANNER, "execution": "plan_only"})
     probe = Probe()
     bar = tqdm(total=int(args.duration_s), desc="load", unit="s", leave=False)
     try:

@@ -52,7 +52,7 @@ def _central_object(scene) -> int:
 
 
 def _plan(objects, table_height_m, target_id, task, displacement, twin_step_s, steps, nthread=2):
-    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=nthread))
+    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=nthread), realtime_factor=0.0)
     session = ManipulationSession(config, twin_step_s)
     session.set_objects(objects, table_height_m)
     outcome = session.request(task, target_id, displacement, 0.0, robot.HOME_Q, robot.GRIPPER_OPEN_M)

@@ -32,7 +32,7 @@ def test_tracked_pose_moves_the_methods_mesh_by_the_true_motion():
 
 
 def _config(run: int, **fields) -> PlannerConfig:
-    config = PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=run))
+    config = PlannerConfig(mppi=MppiConfig(steps=200, nthread=1, seed=run), realtime_factor=0.0)
     for name, value in fields.items():
         setattr(config, name, value)
     return config
@@ -160,13 +160,13 @@ def test_a_torus_is_grasped_by_its_tube_and_lifted():
 def test_a_box_wider_than_the_open_fingers_is_rearranged_by_pushing_it():
     """Planned as a push, with the push's step budget (the rearrange's, 100 here, is too short for it)."""
     scene = _external(trimesh.creation.box((0.15, 0.15, 0.06)), "wide_box")
-    budgets = {"rearrange": 100, "push": 750}
+    budgets = {"rearrange_steps": 100, "push_steps": 750}
 
     def attempt(run):
-        with world_run(scene, run, "rearrange", (0.05, -0.2, 0.0), task_steps=budgets) as (session, _, outcome, _):
+        with world_run(scene, run, "rearrange", (0.05, -0.2, 0.0), **budgets) as (session, _, outcome, _):
             assert isinstance(session.planner._last_reward, PushReward), "no grasp site holds a 15 cm box"
             steps = len(outcome.outcome.result.times_s)
-            return outcome.success and steps > budgets["rearrange"], (outcome.error_m, steps)
+            return outcome.success and steps > budgets["rearrange_steps"], (outcome.error_m, steps)
 
     held, outcomes = holds_in_most(attempt)
     assert held, outcomes

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_planner.finger_clearance import OpenFingers, clearance_m, finger_points, hand_points
+from arm_planner.finger_clearance import OpenFingers, clearance_m, finger_points
 
 
 @dataclass(frozen=True)
@@ -196,6 +196,6 @@ def search_grasp_site(
         best = best or site
         if not target.obstacle_halfspaces:
             return site
-        if clearance_m(hand_points(point, site.axis_xy, fingers), target.obstacle_halfspaces) >= 0:
+        if clearance_m(finger_points(point, site.axis_xy, fingers), target.obstacle_halfspaces) >= 0:
             return site
     return best

@@ -19,6 +19,8 @@ import mujoco
 import mujoco.rollout
 import numpy as np
 
+from arm_core.settings import setting
+
 STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
 
@@ -26,16 +28,14 @@ STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 class MppiConfig:
     """Defaults are the paper's (appendix "MPPI Parameters") except where noted."""
 
-    steps: int = 200
-    num_paths: int = 25
-    horizon: int = 5
-    control_dt_s: float = 0.02
-    # Temperature relative to the spread of path returns in the current batch.
-    temperature: float = 0.05
-    # AR(1) coefficient of the noise along the horizon (0 = white noise).
-    noise_smoothing: float = 0.8
-    nthread: int = 2
-    seed: int = 0
+    steps: int = setting(200, "MPPI steps per plan (paper: 200)", 1, 5000, parameter=True)
+    num_paths: int = setting(25, "Sampled paths per step (paper: 25)", 2, 1000, parameter=True)
+    horizon: int = setting(5, "Control steps per path (paper: 5)", 1, 100)
+    control_dt_s: float = setting(0.02, "Control step, s (paper: 0.02)", 0.002, 0.2)
+    temperature: float = setting(0.05, "MPPI temperature relative to the spread of path returns", 1e-4, 10.0)
+    noise_smoothing: float = setting(0.8, "AR(1) coefficient of the sampling noise along the horizon", 0.0, 0.99)
+    nthread: int = setting(2, "Rollout threads (0: the calling thread)", 0, 64, parameter=True)
+    seed: int = setting(0, "Sampling noise seed", 0, 2**31 - 1)
 
 
 def state_layout(model: mujoco.MjModel) -> tuple[int, int]:

@@ -11,11 +11,11 @@ plans on the array its target id was read from (goal.meshes_stamp; zero: the lat
 latest /joint_states. One goal is served at a time; a goal arriving while another plans is rejected. Every refusal
 (no meshes, unknown target, degenerate mesh, goal out of reach, non-finite joint states, twin
 compilation failure, planning error) aborts the goal with the reason in the result; the node keeps
-serving. With stream:=true (open loop) the controller executes the plan while it is being planned
-(receding horizon, streaming.TrajectoryStream): the first part once stream_lead_s of motion is planned,
-the rest in parts every stream_period_s. With replan_period_s > 0 the plan is executed in chunks of
-that length and re-planned from the newest joint states and meshes after each chunk (closed loop), the
-target found again in newer meshes as the object nearest its last centre.
+serving. The `execution` mode (node_config.EXECUTION_MODES) says what reaches the robot: nothing
+(plan_only); the finished plan if it met the task in the twin (execute); the plan in parts while it is
+being planned (stream, receding horizon: streaming.TrajectoryStream); or chunks of replan_period_s,
+each re-planned from the newest joint states and meshes, the target found again as the object nearest
+its last centre (replan, closed loop).
 /diagnostics reports the real-time factor of the last plan (planning wall time / planned motion).
 """
 
@@ -38,206 +38,37 @@ from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_planner.controller_client import ControllerClient, ExecutionReport
 from arm_planner.messages import TASK_NAMES, joint_state_arrays, trajectory_msg, twin_objects_from_msg
-from arm_planner.mppi import MppiConfig
-from arm_planner.planner import DEFAULT_TASK_STEPS, PlannerConfig, resume_point
+from arm_planner.node_config import PlanNodeConfig
+from arm_planner.planner import resume_point
 from arm_planner.scenes import Scene, SceneHistory, follow_target, observed_displacement
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.streaming import TrajectoryStream
-from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, latched_qos, run_node
+from arm_ros.common import RateLimitedErrors, declare_settings, diagnostics_msg, latched_qos, run_node
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.stamps import time_ns
 from arm_ros.executors import QueueAwareMultiThreadedExecutor
 
 
-def _planner_config(node: Node) -> tuple[PlannerConfig, float]:
-    mppi = MppiConfig(
-        steps=declare(node, "steps", 200, "MPPI steps per plan (paper: 200)", 1, 5000),
-        num_paths=declare(node, "num_paths", 25, "Sampled paths per step (paper: 25)", 2, 1000),
-        horizon=declare(node, "horizon", 5, "Control steps per path (paper: 5)", 1, 100),
-        control_dt_s=declare(node, "control_dt_s", 0.02, "Control step, seconds (paper: 0.02)", 0.002, 0.2),
-        temperature=declare(node, "temperature", 0.05, "MPPI temperature relative to the return spread", 1e-4, 10.0),
-        noise_smoothing=declare(node, "noise_smoothing", 0.8, "AR(1) coefficient of the noise in time", 0.0, 0.99),
-        nthread=declare(node, "nthread", 2, "Rollout threads (0: calling thread)", 0, 64),
-        seed=declare(node, "seed", 0, "Noise seed", 0, 2**31 - 1),
-    )
-    config = PlannerConfig(mppi=mppi)
-    config.close_steps = declare(node, "close_steps", 75, "Steps the gripper closes for (paper: 75)", 1, 1000)
-    config.grasp_lift_goal_m = declare(node, "grasp_lift_goal_m", 0.10, "Lift the grasp reward aims for, m", 0.05, 0.5)
-    config.settle_s = declare(node, "settle_s", 0.3, "Twin settling before planning, s", 0.0, 5.0)
-    config.sleep_objects = declare(node, "sleep_objects", True, "Let resting twin objects sleep until touched")
-    config.rest_creeping_every_step = declare(
-        node, "rest_creeping_every_step", False, "Put creeping objects the robot does not touch to rest every step"
-    )
-    config.sleep_tolerance = declare(
-        node, "sleep_tolerance", 0.0, "Twin objects slower than this sleep until touched (0: MuJoCo's 1e-3)", 0.0, 1.0
-    )
-    config.merge_other_objects = declare(
-        node, "merge_other_objects", False, "Cheaper twin: every object but the target as one convex hull"
-    )
-    config.realtime_factor = declare(
-        node,
-        "realtime_factor",
-        0.9,
-        "Planning wall time per planned motion time the path count adapts to (0: always num_paths)",
-        0.0,
-        100.0,
-    )
-    config.min_paths = declare(node, "min_paths", 8, "Fewest paths per step when planning in real time", 2, 1000)
-    task_steps = {
-        task: declare(node, f"{task}_steps", steps, f"Step budget of {task} (0: steps)", 0, 5000)
-        for task, steps in DEFAULT_TASK_STEPS.items()
-    }
-    config.task_steps = {task: steps for task, steps in task_steps.items() if steps}
-    config.done_hold_steps = declare(node, "done_hold_steps", 10, "Stop once the goal held this many steps", 0, 1000)
-    config.push_hand_speed_m_s = declare(
-        node,
-        "push_hand_speed_m_s",
-        PlannerConfig.push_hand_speed_m_s,
-        "Push: the hand's top speed at and near the object, m/s (0: no cap)",
-        0.0,
-        2.0,
-    )
-    config.carry_hand_speed_m_s = declare(
-        node,
-        "carry_hand_speed_m_s",
-        PlannerConfig.carry_hand_speed_m_s,
-        "Rearrange: the hand's top speed while it holds the object, m/s (0: no cap)",
-        0.0,
-        2.0,
-    )
-    config.push_cage = declare(
-        node, "push_cage", PlannerConfig.push_cage, "Push: open fingers fore and aft of an object that fits"
-    )
-    config.push_cage_margin_m = declare(
-        node,
-        "push_cage_margin_m",
-        PlannerConfig.push_cage_margin_m,
-        "Push: the cage's clearance to the object each side, m (negative: the fingers close onto it)",
-        -0.01,
-        0.02,
-    )
-    config.clear_fingers = declare(
-        node, "clear_fingers", PlannerConfig.clear_fingers, "Grasp: turn the fingers off neighbouring objects"
-    )
-    config.hand_clearance = declare(
-        node,
-        "hand_clearance",
-        PlannerConfig.hand_clearance,
-        "Grasp: coming down, keep the open fingers out of the target and the palm off other objects",
-    )
-    config.grasp_site_search = declare(
-        node,
-        "grasp_site_search",
-        PlannerConfig.grasp_site_search,
-        "Grasp: move to where the target's material lies between the fingers when the centre of mass has none",
-    )
-    config.push_ungraspable = declare(
-        node,
-        "push_ungraspable",
-        PlannerConfig.push_ungraspable,
-        "Rearrange: push a target that is wider than the open fingers along every axis",
-    )
-    config.object_friction = declare(
-        node, "object_friction", PlannerConfig.object_friction, "Twin: object-table sliding friction", 0.05, 2.0
-    )
-    timestep = declare(node, "twin_timestep_s", 0.01, "Twin physics step, s (divides control_dt_s)", 0.001, 0.02)
-    return config, timestep
-
-
 class PlanNode(Node):
     def __init__(self, **node_options):
         super().__init__("plan_node", **node_options)
-        config, timestep = _planner_config(self)
-        self.execute_plans = declare(self, "execute", True, "Send the planned trajectory to the controllers")
-        self.controller_interface = declare(
-            self,
-            "controller_interface",
-            "ros2_control",
-            "ros2_control: FollowJointTrajectory and GripperCommand goals; topic: JointTrajectory on "
-            "arm/joint_trajectory (no execution feedback)",
-            choices=["ros2_control", "topic"],
-        )
-        arm_controller = declare(
-            self, "arm_controller", "arm_controller", "Joint trajectory controller: <name>/follow_joint_trajectory"
-        )
-        gripper_controller = declare(
-            self, "gripper_controller", "gripper_controller", "Gripper action controller: <name>/gripper_cmd"
-        )
-        gripper_max_effort_n = declare(
-            self, "gripper_max_effort_n", 70.0, "GripperCommand max_effort, N (0: the controller's)", 0.0, 1000.0
-        )
-        self.execution_margin_s = declare(
-            self,
-            "execution_margin_s",
-            5.0,
-            "Wait this long past the trajectory's end for the arm controller's result, s",
-            0.0,
-            600.0,
-        )
-        self.observe_timeout_s = declare(
-            self,
-            "observe_timeout_s",
-            15.0,
-            "After the motion, wait this long for meshes of a newer frame to observe the target (0: do not), s",
-            0.0,
-            600.0,
-        )
-        self.replan_period_s = declare(
-            self, "replan_period_s", 0.0, "Closed loop: execute this long, then re-plan (0: open loop)", 0.0, 60.0
-        )
-        self.stream = declare(self, "stream", True, "Open loop: execute the plan while planning the rest")
-        self.stream_lead_s = declare(
-            self, "stream_lead_s", 0.5, "Stream: motion planned before the first part, s", 0.0, 60.0
-        )
-        self.stream_period_s = declare(self, "stream_period_s", 0.2, "Stream: motion planned per part, s", 0.0, 60.0)
-        self.execute_unmet = declare(
-            self,
-            "execute_unmet",
-            True,
-            "Publish a plan that did not meet the task in the twin (false: hold it back and say so in the "
-            "result; needs stream false and replan_period_s 0, where nothing moves before the plan is done)",
-        )
-        if not self.execute_unmet and (self.stream or self.replan_period_s > 0):
-            raise ValueError(
-                "execute_unmet false needs stream false and replan_period_s 0: a streamed or re-planned "
-                "motion is under way before the plan is done"
-            )
-        self.max_replans = declare(self, "max_replans", 10, "Closed loop: re-plans per goal at most", 0, 1000)
-        self.feedback_every = declare(self, "feedback_every_steps", 10, "Publish feedback every N steps", 1, 1000)
-        self.joint_state_timeout_s = declare(
-            self, "joint_state_timeout_s", 2.0, "Refuse goals when joint states are older than this, s", 0.0, 3600.0
-        )
-        self.max_object_size_m = declare(
-            self, "max_object_size_m", 1.0, "Leave objects larger than this out of the twin, m", 0.01, 100.0
-        )
-        self.replan_target_radius_m = declare(
-            self,
-            "replan_target_radius_m",
-            0.15,
-            "Closed loop: newer meshes' target is the object nearest the last one's centre, within this, m",
-            0.0,
-            10.0,
-        )
-        history = declare(self, "scene_history", 20, "/arm/meshes arrays kept for goals naming one by stamp", 1, 1000)
-        base_xyz = declare(
-            self,
-            "robot_base_xyz_m",
-            [-0.55, 0.0, 0.0],
-            "World position of the robot base (as segmentation_node's); the twin stands it on the table at x, y",
-        )
-        if len(base_xyz) != 3 or not all(np.isfinite(v) for v in base_xyz):
+        self.config = config = declare_settings(self, PlanNodeConfig())
+        base_xyz = config.robot_base_xyz_m
+        if not all(np.isfinite(v) for v in base_xyz):
             raise ValueError(f"robot_base_xyz_m must be 3 finite values, got {list(base_xyz)}")
-        self.session = ManipulationSession(config, timestep, robot_base_world=(float(base_xyz[0]), float(base_xyz[1])))
+        self.session = ManipulationSession(
+            config.planner, config.twin_timestep_s, robot_base_world=(float(base_xyz[0]), float(base_xyz[1]))
+        )
         self.finger_joint = self.session.robot.trajectory_joint_names[-1]
         self.controllers = None
-        if self.controller_interface == "ros2_control":
+        if config.controller_interface == "ros2_control":
             self.controllers = ControllerClient(
-                self, arm_controller, gripper_controller, self.finger_joint, gripper_max_effort_n
+                self, config.arm_controller, config.gripper_controller, self.finger_joint, config.gripper_max_effort_n
             )
         self.errors = RateLimitedErrors(self.get_logger())
 
         self._lock = threading.Lock()
-        self._scenes = SceneHistory(history)  # the last /arm/meshes arrays, by stamp
+        self._scenes = SceneHistory(config.scene_history)  # the last /arm/meshes arrays, by stamp
         self._joints = None  # (arm_q, opening, node-clock ns at receipt) from the latest valid /joint_states
         self._joint_error = ""
         self._busy = False
@@ -261,15 +92,16 @@ class PlanNode(Node):
             cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=ReentrantCallbackGroup(),
         )
+        mppi = config.planner.mppi
         self.get_logger().info(
-            f"plan_node ready: {config.mppi.steps} steps x {config.mppi.num_paths} paths x horizon "
-            f"{config.mppi.horizon} at {config.mppi.control_dt_s} s, twin step {timestep} s"
+            f"plan_node ready ({config.execution}): {mppi.steps} steps x {mppi.num_paths} paths x horizon "
+            f"{mppi.horizon} at {mppi.control_dt_s} s, twin step {config.twin_timestep_s} s"
         )
 
     # --- inputs ------------------------------------------------------------------------------
     def on_meshes(self, msg: ReconstructedObjectArray) -> None:
         try:
-            objects, table_height_m, dropped = twin_objects_from_msg(msg, self.max_object_size_m)
+            objects, table_height_m, dropped = twin_objects_from_msg(msg, self.config.max_object_size_m)
         except ConversionError as error:
             self.meshes_rejected += 1
             self.errors.error("meshes", f"ignoring malformed /arm/meshes: {error}")
@@ -309,8 +141,8 @@ class PlanNode(Node):
         if joints is None:
             return None, "no joint states received yet"
         age_s = 1e-9 * (self.get_clock().now().nanoseconds - joints[2])  # ROS time: simulated with use_sim_time
-        if self.joint_state_timeout_s > 0 and age_s > self.joint_state_timeout_s:
-            return None, f"joint states are older than {self.joint_state_timeout_s} s"
+        if self.config.joint_state_timeout_s > 0 and age_s > self.config.joint_state_timeout_s:
+            return None, f"joint states are older than {self.config.joint_state_timeout_s} s"
         return joints, ""
 
     def _goal_scene(self, goal) -> tuple[Scene | None, str]:
@@ -334,7 +166,7 @@ class PlanNode(Node):
             latest = self._scenes.latest()
         if latest is scene:
             return scene, target_id
-        followed = follow_target(scene, target_id, latest, self.replan_target_radius_m)
+        followed = follow_target(scene, target_id, latest, self.config.replan_target_radius_m)
         if followed is None:
             self.errors.error(
                 "replan target", f"target {target_id} not found in newer meshes; re-planning on the older ones"
@@ -355,7 +187,7 @@ class PlanNode(Node):
     def _stream_part(self, stream: TrajectoryStream, joint_names) -> None:
         now = self.get_clock().now()  # one reading: the part's times count from its stamp
         part = stream.part(1e-9 * now.nanoseconds)
-        if part is not None and self.execute_plans:
+        if part is not None:
             self._send(joint_names, part.times_s, part.positions, now.to_msg())
 
     def _plan_once(
@@ -376,7 +208,7 @@ class PlanNode(Node):
         feedback = Manipulate.Feedback()
 
         def on_step(step: int, total: int, state: str, error_m: float) -> None:
-            if step % self.feedback_every == 0 or step == total:
+            if step % self.config.feedback_every_steps == 0 or step == total:
                 feedback.step, feedback.total_steps, feedback.state = step, total, state
                 feedback.predicted_error_m = float(error_m)
                 goal_handle.publish_feedback(feedback)
@@ -427,14 +259,13 @@ class PlanNode(Node):
             }
         return outcome
 
-    def _publish(self, outcome: Outcome, count: int | None = None, publish: bool = True) -> JointTrajectory:
-        """The outcome's first count points as a trajectory, sent to the controller when execute and
-        publish are both true."""
+    def _publish(self, outcome: Outcome, count: int | None = None, send: bool = True) -> JointTrajectory:
+        """The outcome's first count points as a trajectory, sent to the controllers when send is true."""
         result = outcome.result
         n = len(result.times_s) if count is None else count
         msg = trajectory_msg(result.joint_names, result.times_s[:n], result.joint_positions[:n])
         msg.header.stamp = self.get_clock().now().to_msg()
-        if self.execute_plans and publish and n:
+        if send and n:
             self._send(result.joint_names, result.times_s[:n], result.joint_positions[:n], msg.header.stamp)
         return msg
 
@@ -488,8 +319,11 @@ class PlanNode(Node):
             return Outcome(False, problem), JointTrajectory()
         target_id = int(goal.target_id)
         self._goal_start = (scene, target_id)
-        if self.replan_period_s <= 0 and self.stream:
-            stream = TrajectoryStream(self.session.config.mppi.control_dt_s, self.stream_lead_s, self.stream_period_s)
+        mode = self.config.execution
+        if mode == "stream":
+            stream = TrajectoryStream(
+                self.session.config.mppi.control_dt_s, self.config.stream_lead_s, self.config.stream_period_s
+            )
             outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None, stream)
             if not outcome.planned:
                 return outcome, JointTrajectory()
@@ -498,16 +332,17 @@ class PlanNode(Node):
         outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
         if not outcome.planned:
             return outcome, JointTrajectory()
-        if self.replan_period_s <= 0:
-            held_back = not outcome.success and not self.execute_unmet
-            if held_back:
-                outcome.message += "; not executed (execute_unmet is false)"
-            return outcome, self._publish(outcome, publish=not held_back)
+        if mode == "plan_only":
+            return outcome, self._publish(outcome, send=False)
+        if mode == "execute":
+            if not outcome.success:
+                outcome.message += "; not executed: the plan did not meet the task in the twin"
+            return outcome, self._publish(outcome, send=outcome.success)
         start_com, resume = outcome.start_com_world, None
         executed_times, executed_positions, executed_s = [], [], 0.0  # the chunks one after another
-        for _ in range(self.max_replans + 1):
+        for _ in range(self.config.max_replans + 1):
             result = outcome.result
-            chunk = int(np.searchsorted(result.times_s, self.replan_period_s, side="right"))
+            chunk = int(np.searchsorted(result.times_s, self.config.replan_period_s, side="right"))
             last = chunk >= len(result.times_s) or goal_handle.is_cancel_requested
             n = len(result.times_s) if last else chunk
             self._publish(outcome, n)
@@ -545,23 +380,25 @@ class PlanNode(Node):
             return
         goal_handle.publish_feedback(Manipulate.Feedback(state="executing", executing=True))
         report = self.controllers.wait(
-            self.execution_margin_s, should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok()
+            self.config.execution_margin_s, should_stop=lambda: goal_handle.is_cancel_requested or not rclpy.ok()
         )
         if goal_handle.is_cancel_requested:
             self.controllers.cancel()
         result.controller_error_code, result.controller_message = report.error_code, report.message
-        if report.error_code != 0 or self.observe_timeout_s <= 0 or self._goal_start is None:
+        if report.error_code != 0 or self.config.observe_timeout_s <= 0 or self._goal_start is None:
             return
         scene, target_id = self._goal_start
-        newer = self._scene_after(report, self.observe_timeout_s)
+        newer = self._scene_after(report, self.config.observe_timeout_s)
         if newer is None:
-            result.controller_message += f"; no meshes of a frame after the motion within {self.observe_timeout_s} s"
+            result.controller_message += (
+                f"; no meshes of a frame after the motion within {self.config.observe_timeout_s} s"
+            )
             return
         if task == "grasp":
             expected = (0.0, 0.0, self.session.config.grasp_lift_goal_m)
         else:
             expected = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
-        moved = observed_displacement(scene, target_id, newer, expected, self.replan_target_radius_m)
+        moved = observed_displacement(scene, target_id, newer, expected, self.config.replan_target_radius_m)
         if moved is None:
             result.controller_message += "; the target was not found in the meshes after the motion"
             return

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from arm_core.settings import setting
 from arm_planner.finger_clearance import OpenFingers
 from arm_planner.kinematics import BodyKinematics
 from arm_planner.mppi import (
@@ -36,7 +37,6 @@ from arm_planner.tasks.push import PUSH_STATES, CagePushReward, PushReward
 from arm_sim.world import OVERLAP_EXCLUDE_M, SLIDING_FRICTION
 
 DEFAULT_TOLERANCE_M = 0.025
-DEFAULT_TASK_STEPS = {"rearrange": 500, "push": 750}
 
 
 class TaskInfeasible(ValueError):
@@ -69,96 +69,76 @@ class NoiseConfig:
 
 @dataclass
 class PlannerConfig:
+    """The planner's settings (docs/experiments.md has the figures behind each default)."""
+
     mppi: MppiConfig = field(default_factory=MppiConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     weights: RewardWeights = field(default_factory=RewardWeights)
-    close_steps: int = 75
-    grasp_lift_goal_m: float = 0.10
-    rearrange_carry_height_m: float = 0.04
-    # Step budget per task (None: mppi.steps). Rearrange = grasp (75 closing steps) + a 28 cm carry,
-    # which does not fit the paper's 200 steps of 0.02 s; a push of 30 cm ending within 2.5 cm needs
-    # room to brake and correct after the approach. 500 steps (10 s): on the default bench_manip
-    # scenes ground truth met 24 of 31 tasks against 20 with 300. Push 750 (15 s): the caging push
-    # advances 3-5 cm/s against the object's lean; on the 99-episode design's push episodes ground
-    # truth met 43 of 59 against 39 with 500, arm 38 against 35 (docs/experiments.md).
-    task_steps: dict = field(default_factory=lambda: dict(DEFAULT_TASK_STEPS))
-    # Let resting objects sleep in the twin (no collision work until touched); see mppi.set_sleep.
-    sleep_objects: bool = True
-    # Every step, objects creeping slower than 2 cm/s that the robot does not touch are put to rest
-    # (velocity zeroed, sleeping in the rollouts): reconstructed objects resting against each other
-    # otherwise jitter awake, and their contacts cost most of every rollout.
-    rest_creeping_every_step: bool = False
-    # MuJoCo's sleep tolerance for the twin (0: MuJoCo's default, 1e-3); a larger one lets reconstructed
-    # objects that jitter against each other fall asleep on their own (woken by any awake contact).
-    sleep_tolerance: float = 0.0
-    # Cheaper twin: every object but the target is one convex hull (its parts merged); their part-part
-    # contacts in a pile of reconstructed objects otherwise cost most of every rollout.
-    merge_other_objects: bool = False
-    # Real-time planning (0: off, every step samples mppi.num_paths): paths per step adapt so that a
-    # step's wall time stays within this factor of control_dt_s (mppi.PathBudget), never below
-    # min_paths. Outcomes then depend on the machine's load, so benchmarks leave it off.
-    realtime_factor: float = 0.0
-    min_paths: int = 8
-    # Physics time the twin is settled for (robot holding still) before planning. 1 s let toppling
-    # reconstructions come to rest (a 13-object twin of the running graph: 23 -> 13 ms per step) but
-    # ground truth met 21 of 31 bench_manip tasks against 27 (docs/experiments.md).
-    settle_s: float = 0.3
-    # Objects overlapping deeper than this as built (m) do not collide with each other in the twin
-    # (inf: every pair collides).
-    twin_overlap_exclude_m: float = OVERLAP_EXCLUDE_M
-    # Stop once the predicted outcome has met the task for this many consecutive steps (0: never).
-    done_hold_steps: int = 10
-    # ... and the target is within this distance of the reward's goal (tighter than the task's
-    # tolerance, for margin against twin/world mismatch), m.
-    done_goal_distance_m: float = 0.01
-    # Push: the hand's top speed (m/s) while pushing or within the reward's disengage distance of its
-    # contact point, as a cap on every sampled path (0: no cap). Uncapped, the hand slid top-heavy
-    # objects at up to 0.75 m/s and they tipped over; 0.2: push-only bench_manip, ground truth 19 of 42
-    # against 17, arm 17 of 38 against 13 (docs/experiments.md). 0.1 stalled at the first contact.
-    push_hand_speed_m_s: float = 0.2
-    # Rearrange: the hand's top speed (m/s) while it holds the object, as a cap on every sampled path
-    # (0: no cap). Faster, the object swings about the fingers' closing axis and drops.
-    carry_hand_speed_m_s: float = 0.2
-    # Rearrange: close the fingers along the carry direction when the object fits (GraspReward).
-    carry_closing_along: bool = True
-    # Grasp and rearrange: turn the closing axis where a finger would land on another object
-    # (finger_clearance; needs the robot spec's finger sizes): only where a finger would certainly enter
-    # one. On the 99-episode design's grasp and rearrange episodes over two seeds ground truth gained 2
-    # and lost none, `arm` gained 1 and lost 1; turning within 5 mm lost 3 and gained 2 (docs/experiments.md).
-    clear_fingers: bool = True
-    # Grasp and rearrange: where the site over the centre of mass has no material between the fingers
-    # (a ring, a torus, a U) or a finger would come down on the target, grasp at the nearest site with
-    # its material squarely between them (grasp_site).
-    grasp_site_search: bool = True
-    # Grasp and rearrange: coming down, the open fingers keep out of the target (FingerIntrusion: a
-    # finger landing on a tall or top-heavy target tips it), and the closing axis turns where the palm
-    # would come down on another object (needs the robot spec's finger and palm sizes). Off: on the
-    # 99-episode design's grasp and rearrange episodes ground truth went 57 -> 56 / 53 -> 54 (seed 0 /
-    # seed 1) against the rule fixed before the run (a rise on both), `arm` 46 -> 48 / 48 -> 49
-    # (docs/experiments.md).
-    hand_clearance: bool = False
-    # Rearrange: push a target that no grasp site holds and that is wider than the open fingers along
-    # every axis to its goal instead of trying to pick it up.
-    push_ungraspable: bool = True
-    # Push: height of the hand's contact point above the object's bottom, m (at most half its height;
-    # docs/experiments.md has the heights measured).
-    push_contact_height_m: float = 0.018
-    # Push with the open fingers fore and aft of the object (CagePushReward) when it fits between them
-    # and the robot's spec gives its finger geometry; otherwise, or when False, with one finger.
-    push_cage: bool = True
-    # ... closed to its extent along the push plus this each side, m (CagePushReward.cage_margin_m);
-    # negative: the fingers close that far onto the object, a light pinch. With 3 mm, wine glasses and
-    # T-shapes leaned onto the front finger and stalled or toppled; with none, top-heavy lamps still
-    # leaned onto it and turned out of the cage; -2 mm holds them upright (docs/experiments.md).
-    push_cage_margin_m: float = -0.002
-    # Object-table sliding friction the twin assumes: the table the robot works on (the simulator's
-    # by default; set it to the real table's).
-    object_friction: float = SLIDING_FRICTION
+    close_steps: int = setting(75, "Grasp: steps the gripper closes for (paper: 75)", 1, 1000)
+    grasp_lift_goal_m: float = setting(0.10, "Grasp: the lift the reward aims for, m (success: 0.05)", 0.05, 0.5)
+    rearrange_carry_height_m: float = setting(0.04, "Rearrange: least carry height above the goal, m", 0.0, 0.5)
+    # A rearrange is a grasp (75 closing steps) and a 28 cm carry, which does not fit the paper's
+    # 200 steps of 0.02 s; a caging push advances 3-5 cm/s and needs room to brake and correct.
+    rearrange_steps: int = setting(500, "Rearrange: step budget (0: steps)", 0, 5000)
+    push_steps: int = setting(750, "Push: step budget (0: steps)", 0, 5000)
+    # Resting objects do no collision work until touched (mppi.set_sleep).
+    sleep_objects: bool = setting(True, "Twin: resting objects sleep until touched")
+    # Real-time planning: paths per step adapt so that a step's wall time stays within this factor of
+    # control_dt_s (mppi.PathBudget). Outcomes then depend on the machine's load: benchmarks plan
+    # with 0, a fixed path count.
+    realtime_factor: float = setting(
+        0.9,
+        "Planning wall time per planned motion time the path count adapts to (0: always num_paths)",
+        0.0,
+        100.0,
+        parameter=True,
+    )
+    min_paths: int = setting(8, "Fewest paths per step when planning in real time", 2, 1000)
+    settle_s: float = setting(0.3, "Twin: settling with the robot still before planning, s", 0.0, 5.0, parameter=True)
+    twin_overlap_exclude_m: float = setting(
+        OVERLAP_EXCLUDE_M, "Twin: objects overlapping deeper than this as built do not collide, m", 0.0, float("inf")
+    )
+    done_hold_steps: int = setting(
+        10, "Stop once the predicted outcome met the task this many steps (0: never)", 0, 1000
+    )
+    # Tighter than the task's tolerance: margin against twin/world mismatch.
+    done_goal_distance_m: float = setting(0.01, "... and the target is this near the reward's goal, m", 0.0, 1.0)
+    # Uncapped, the hand slid top-heavy objects at up to 0.75 m/s and they tipped over.
+    push_hand_speed_m_s: float = setting(
+        0.2, "Push: the hand's top speed at and near the object, m/s (0: no cap)", 0.0, 2.0
+    )
+    # Faster, a held object swings about the fingers' closing axis and drops.
+    carry_hand_speed_m_s: float = setting(
+        0.2, "Rearrange: the hand's top speed while it holds the object, m/s (0: no cap)", 0.0, 2.0
+    )
+    carry_closing_along: bool = setting(True, "Rearrange: close the fingers along the carry when the object fits")
+    clear_fingers: bool = setting(True, "Grasp: turn the closing axis where a finger would land on another object")
+    grasp_site_search: bool = setting(
+        True, "Grasp: move the grasp to where the target's material lies between the fingers (rings, U shapes)"
+    )
+    push_ungraspable: bool = setting(True, "Rearrange: push a target wider than the open fingers along every axis")
+    push_contact_height_m: float = setting(
+        0.018, "Push: the hand's contact height above the object's bottom, m (at most half its height)", 0.0, 0.2
+    )
+    push_cage: bool = setting(True, "Push: the open fingers fore and aft of an object that fits between them")
+    # 3 mm: wine glasses and T-shapes leaned onto the front finger; -2 mm holds them upright.
+    push_cage_margin_m: float = setting(
+        -0.002, "Push: the cage's clearance each side, m (negative: the fingers close onto the object)", -0.01, 0.02
+    )
+    object_friction: float = setting(
+        SLIDING_FRICTION, "Twin: object-table sliding friction (set the real table's)", 0.05, 2.0, parameter=True
+    )
+
+    @property
+    def task_steps(self) -> dict[str, int]:
+        """Step budget per task that has its own (the others: mppi.steps)."""
+        budgets = {"rearrange": self.rearrange_steps, "push": self.push_steps}
+        return {task: steps for task, steps in budgets.items() if steps}
 
     @property
     def uses_hand_geometry(self) -> bool:
         """Whether grasps use the open fingers' (and palm's) sizes and the objects' convex parts."""
-        return self.clear_fingers or self.grasp_site_search or self.hand_clearance
+        return self.clear_fingers or self.grasp_site_search
 
 
 @dataclass
@@ -215,25 +195,14 @@ class Planner:
         free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         self._object_qpos = np.array([model.jnt_qposadr[j] + k for j in free for k in range(7)], dtype=int)
         self._object_dofs = np.array([model.jnt_dofadr[j] + k for j in free for k in range(6)], dtype=int)
-        self._object_roots = model.body_rootid[model.jnt_bodyid[free]] if free else np.zeros(0, dtype=int)
         self._object_qpos_trees = np.repeat(model.body_treeid[model.jnt_bodyid[free]], 7) if free else np.zeros(0, int)
-        self._robot_root = int(model.body_rootid[self.robot.tcp_body])
 
     def close(self) -> None:
         self.mppi.close()
 
-    def _touching_robot(self, data: mujoco.MjData) -> np.ndarray:
-        """Per object: in contact with the robot now."""
-        n = data.ncon
-        roots = self.model.body_rootid[
-            self.model.geom_bodyid[np.stack([data.contact.geom1[:n], data.contact.geom2[:n]])]
-        ]
-        touching = roots[:, (roots == self._robot_root).any(axis=0)]
-        return np.isin(self._object_roots, touching)
-
-    def _stop_creeping(self, data: mujoco.MjData, spare_touched: bool = False) -> bool:
+    def _stop_creeping(self, data: mujoco.MjData) -> bool:
         """Zero the velocity of objects creeping slower than 2 cm/s and 0.2 rad/s (contact jitter);
-        True when it zeroed any. spare_touched: leave objects the robot touches alone.
+        True when it zeroed any.
 
         Such an object would otherwise stay awake and wake every object it touches in every rollout;
         at rest it sleeps until something pushes it.
@@ -243,8 +212,6 @@ class Planner:
         qvel = data.qvel[self._object_dofs].reshape(-1, 6)
         creeping = (np.linalg.norm(qvel[:, :3], axis=1) < 0.02) & (np.linalg.norm(qvel[:, 3:], axis=1) < 0.2)
         creeping &= np.any(qvel != 0.0, axis=1)
-        if spare_touched:
-            creeping &= ~self._touching_robot(data)
         if not creeping.any():
             return False
         qvel[creeping] = 0.0
@@ -261,12 +228,12 @@ class Planner:
         asleep = data.tree_asleep[self._object_qpos_trees] >= 0
         self.model.qpos0[self._object_qpos[asleep]] = data.qpos[self._object_qpos[asleep]]
 
-    def _rest_objects_here(self, data: mujoco.MjData, spare_touched: bool = False) -> None:
+    def _rest_objects_here(self, data: mujoco.MjData) -> None:
         """Objects at rest in `data` sleep there in the rollouts: MuJoCo initialises sleeping islands at
         qpos0, so qpos0 takes their current poses (every rollout path starts from reset data)."""
         if self.config.sleep_objects:
             self.model.qpos0[self._object_qpos] = data.qpos[self._object_qpos]
-            self._stop_creeping(data, spare_touched)
+            self._stop_creeping(data)
         mujoco.mj_forward(self.model, data)
 
     def _reward(self, request: PlanRequest, geometry: TargetGeometry):
@@ -298,7 +265,6 @@ class Planner:
                 finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
                 fingers=self._open_fingers() if self.config.uses_hand_geometry else None,
                 clear_fingers=self.config.clear_fingers,
-                keep_fingers_off_target=self.config.hand_clearance,
                 search_grasp_site=search,
             )
             if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push
@@ -367,8 +333,6 @@ class Planner:
             spec.finger_width_m,
             spec.fingertip_to_palm_m,
             spec.tcp_above_fingertip_m,
-            spec.palm_length_m if self.config.hand_clearance else 0.0,
-            spec.palm_width_m if self.config.hand_clearance else 0.0,
         )
 
     def tcp_jacobian(self, data: mujoco.MjData) -> np.ndarray:
@@ -418,8 +382,6 @@ class Planner:
         reward = self._last_reward = self._reward(request, geometry)
         if cfg.sleep_objects:
             set_sleep(model, self._object_trees, start_asleep=False)
-            if cfg.sleep_tolerance > 0:
-                model.opt.sleep_tolerance = cfg.sleep_tolerance
         mujoco.mj_resetData(model, data)
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
         ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], reward.gripper_closed, model.nu)
@@ -473,8 +435,6 @@ class Planner:
                 break
             if observe is not None and observe(step, ctrl, model, data):
                 self._rest_objects_here(data)
-            elif cfg.sleep_objects and cfg.rest_creeping_every_step and self._stop_creeping(data, spare_touched=True):
-                self._rest_objects_here(data, spare_touched=True)
             elif cfg.sleep_objects:
                 self._sleeping_poses_as_rest(data)
             executed = get_state(model, data)

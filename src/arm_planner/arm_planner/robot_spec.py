@@ -21,8 +21,7 @@ class RobotSpec:
     length below the palm and the TCP's height above their tips (metres); with a gap of 0 the planner
     pushes with one finger only (no caging push). finger_thickness_m / finger_width_m: each finger's
     size along and across the closing axis (metres); with 0 the planner does not turn the closing
-    axis to keep the fingers off neighbouring objects. palm_length_m / palm_width_m: the palm's size
-    along and across the closing axis (metres); with 0 the palm is not kept off neighbours.
+    axis to keep the fingers off neighbouring objects.
     """
 
     arm_joints: tuple[str, ...]
@@ -39,8 +38,6 @@ class RobotSpec:
     tcp_above_fingertip_m: float = 0.0
     finger_thickness_m: float = 0.0
     finger_width_m: float = 0.0
-    palm_length_m: float = 0.0
-    palm_width_m: float = 0.0
 
     def resolve(self, model: mujoco.MjModel) -> ResolvedRobot:
         return ResolvedRobot(model, self)

@@ -8,10 +8,9 @@ ends as an Outcome with a reason instead of an exception.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
-import trimesh
 
 from arm_planner.planner import (
     DEFAULT_TOLERANCE_M,
@@ -59,21 +58,6 @@ def refused(message: str) -> Outcome:
     return Outcome(False, message)
 
 
-def merged_hull(obj: TwinObject) -> TwinObject:
-    """The object with its convex parts (or, without parts, its mesh) merged into one convex hull."""
-    if obj.convex_parts:
-        vertices = np.concatenate([p.vertices for p in obj.convex_parts])
-    elif obj.mesh is not None and len(obj.mesh.vertices) >= 4:
-        vertices = obj.mesh.vertices
-    else:
-        return obj
-    try:
-        hull = trimesh.Trimesh(vertices).convex_hull
-    except (RuntimeError, ValueError):  # degenerate (flat) point sets: qhull's error; keep the parts
-        return obj
-    return replace(obj, convex_parts=[hull])
-
-
 class ManipulationSession:
     """Holds the latest objects, a twin and a planner (rebuilt only when the geometry changes)."""
 
@@ -103,13 +87,8 @@ class ManipulationSession:
             self.planner.close()
             self.planner = None
 
-    def _twin_objects(self, target_id: int) -> list[TwinObject]:
-        if not self.config.merge_other_objects:
-            return self.objects
-        return [o if o.id == target_id or len(o.convex_parts) == 1 else merged_hull(o) for o in self.objects]
-
     def _ensure_twin(self, target_id: int) -> None:
-        objects = self._twin_objects(target_id)
+        objects = self.objects
         signature = geometry_signature(objects, self.table_height_m)
         if self.twin is not None and self.twin.signature == signature:
             return

@@ -101,8 +101,6 @@ def panda_robot_spec() -> RobotSpec:
         tcp_above_fingertip_m=float(sim_robot.TCP_ABOVE_FINGERTIP_M),
         finger_thickness_m=2 * float(sim_robot.FINGER_HALF_SIZE_M[1]),
         finger_width_m=2 * float(sim_robot.FINGER_HALF_SIZE_M[0]),
-        palm_length_m=2 * float(sim_robot.PALM_HALF_SIZE_M[1]),
-        palm_width_m=2 * float(sim_robot.PALM_HALF_SIZE_M[0]),
     )
 
 

@@ -210,38 +210,6 @@ def test_rearrange_fingers_close_along_the_carry_when_the_object_fits():
     np.testing.assert_allclose(np.abs(closing((0.04, 0.03), gap=0.0)), [0.0, 1.0, 0.0], atol=1e-9, err_msg="no gap")
 
 
-def _tall_column_grasp(**options) -> GraspReward:
-    """A grasp of a 4 x 4 x 20 cm column with the robot's open fingers known; hand in qpos[0:3]."""
-    import trimesh
-
-    from arm_planner.finger_clearance import OpenFingers, halfspaces
-
-    column = trimesh.creation.box((0.04, 0.04, 0.20))
-    column.apply_translation((0.0, 0.0, 0.10))
-    geometry = TargetGeometry(np.array([0.0, 0.0, 0.10]), column.vertices, 0.0, part_halfspaces=[halfspaces(column)])
-    fingers = OpenFingers(gap_m=0.082, thickness_m=0.012, width_m=0.02, length_m=0.055, tcp_above_tip_m=0.007)
-    options = dict(search_grasp_site=False, clear_fingers=False) | options
-    return GraspReward(
-        hand=poses_from(0), target=poses_from(3), geometry=geometry, qpos_offset=0, nq=6, fingers=fingers, **options
-    )
-
-
-def test_coming_down_a_finger_that_would_land_on_the_target_costs_more_than_one_beside_it():
-    reward = _tall_column_grasp()
-    com = reward.geometry.com_world
-    # poses_from's hand closes along world y. The same distance from the grasp site, below the top:
-    # off along the closing axis a finger comes down on the column; off across it both straddle it.
-    on_top = np.concatenate([reward.grasp_point + [0.0, 0.03, 0.03], com])
-    beside = np.concatenate([reward.grasp_point + [0.03, 0.0, 0.03], com])
-    at_site = np.concatenate([reward.grasp_point, com])
-    assert reward.finger_depth_penalty(*reward.hand(at_site[None]))[0] == 0.0, "the grasp site itself costs nothing"
-    scores = reward(np.stack([on_top, beside]), np.zeros((2, 0)))
-    assert scores[1] > scores[0] + 0.01
-    off = _tall_column_grasp(keep_fingers_off_target=False)
-    scores = off(np.stack([on_top, beside]), np.zeros((2, 0)))
-    assert scores[1] == pytest.approx(scores[0]), "without the term the two cost the same"
-
-
 def test_narrowest_horizontal_width_is_the_short_side_of_a_box_whatever_its_yaw():
     from arm_planner.tasks.base import narrowest_horizontal_width_m
 

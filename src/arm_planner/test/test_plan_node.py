@@ -2,6 +2,7 @@
 
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -28,11 +29,11 @@ def graph():
     rclpy.init()
     overrides = [
         Parameter("steps", value=5),
-        Parameter("push_steps", value=0),
         Parameter("settle_s", value=0.0),
         Parameter("controller_interface", value="topic"),  # the trajectory as the tests receive it
     ]
     node = PlanNode(parameter_overrides=overrides)
+    node.session.config.push_steps = 0  # pushes too plan `steps` (5) steps
     client = Node("plan_node_test_client")
     executor = QueueAwareMultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
@@ -113,12 +114,13 @@ def test_closed_loop_replanning_executes_in_chunks(graph):
     node, client, action, received = graph
     _publish_inputs(client, list(robot.HOME_Q) + [0.04])
     time.sleep(0.3)
-    node.replan_period_s, node.max_replans = 0.04, 2
+    config = node.config
+    node.config = replace(config, execution="replan", replan_period_s=0.04, max_replans=2)
     try:
         before = len(received)
         result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
     finally:
-        node.replan_period_s = 0.0
+        node.config = config
     assert result.trajectory.points, result.message
     deadline = time.monotonic() + 5
     while len(received) - before < 3:
@@ -145,12 +147,13 @@ def test_streamed_parts_join_into_the_plan(graph):
     node, client, action, received = graph
     _publish_inputs(client, list(robot.HOME_Q) + [0.04])
     time.sleep(0.3)
-    node.stream_lead_s, node.stream_period_s = 0.04, 0.04
+    config = node.config
+    node.config = replace(config, stream_lead_s=0.04, stream_period_s=0.04)
     try:
         before = len(received)
         result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
     finally:
-        node.stream_lead_s, node.stream_period_s = 0.5, 0.2
+        node.config = config
     positions = np.array([p.positions for p in result.trajectory.points])
     assert len(positions) == 5, result.message
     deadline = time.monotonic() + 5
@@ -176,16 +179,17 @@ def test_streamed_parts_join_into_the_plan(graph):
             assert due.setdefault(start + k, t) == pytest.approx(t, abs=1e-5)
 
 
-def test_a_plan_the_twin_did_not_meet_is_held_back_when_asked(graph):
+def test_execute_mode_holds_back_a_plan_the_twin_did_not_meet(graph):
     node, client, action, received = graph
     _publish_inputs(client, list(robot.HOME_Q) + [0.04])
     time.sleep(0.3)
-    node.stream, node.execute_unmet = False, False
+    config = node.config
+    node.config = replace(config, execution="execute")
     try:
         before = len(received)
         result = _send(action, Manipulate.Goal.TASK_GRASP, 4)  # 5 steps: never met
     finally:
-        node.stream, node.execute_unmet = True, True
+        node.config = config
     assert not result.success and "not executed" in result.message
     assert len(result.trajectory.points) == 5
     time.sleep(0.5)

@@ -2,6 +2,7 @@
 for the gripper), served by the sim's controllers; the executed result reaches the goal's result."""
 
 import threading
+from dataclasses import replace
 import time
 
 import numpy as np
@@ -49,7 +50,7 @@ def graph():
     overrides = [
         Parameter("steps", value=10),
         Parameter("settle_s", value=0.0),
-        Parameter("stream", value=False),
+        Parameter("execution", value="stream"),
         Parameter("observe_timeout_s", value=5.0),
     ]
     node = PlanNode(parameter_overrides=overrides)
@@ -119,13 +120,14 @@ def test_with_no_controller_running_the_result_says_so(graph):
 
     real = node.controllers
     node.controllers = ControllerClient(node, "absent_arm_controller", "absent_gripper", node.finger_joint, 10.0)
-    node.execution_margin_s = 0.5
+    config = node.config
+    node.config = replace(config, execution_margin_s=0.5)
     try:
         handle = _wait(action.send_goal_async(Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=4)))
         result = _wait(handle.get_result_async()).result
     finally:
         node.controllers.close()
-        node.controllers, node.execution_margin_s = real, 5.0
+        node.controllers, node.config = real, config
     assert result.trajectory.points
     assert result.controller_error_code == Manipulate.Result.EXECUTION_TIMED_OUT
     assert "absent_arm_controller" in result.controller_message

@@ -17,7 +17,7 @@ from arm_planner.tasks.base import TargetGeometry
 def _setup(steps=200, seed=0):
     model = gantry_model()
     model.opt.timestep = 0.01
-    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=1, seed=seed))
+    config = PlannerConfig(mppi=MppiConfig(steps=steps, nthread=1, seed=seed), realtime_factor=0.0)
     config.noise.linear_std_m_s = 0.3
     config.settle_s = 0.1
     planner = Planner(model, GANTRY_SPEC, config)
@@ -164,7 +164,7 @@ def test_a_rearrange_that_becomes_a_push_is_planned_as_a_push():
         "finger_thickness_m": 0.01,
         "finger_width_m": 0.016,
     }
-    config = PlannerConfig(mppi=MppiConfig(steps=2, nthread=1), task_steps={"push": 3, "rearrange": 7})
+    config = PlannerConfig(mppi=MppiConfig(steps=2, nthread=1), push_steps=3, rearrange_steps=7)
     planner = Planner(gantry_model(), dataclasses.replace(GANTRY_SPEC, **fingers), config)
     wide = trimesh.creation.box(extents=(0.2, 0.2, 0.06))
     wide.apply_translation(geometry.com_world)

@@ -21,7 +21,7 @@ def _objects():
 
 @pytest.fixture(scope="module")
 def session():
-    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
+    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), push_steps=0, rearrange_steps=0, realtime_factor=0.0)
     config.settle_s = 0.0
     s = ManipulationSession(config, 0.01)
     s.set_objects(_objects(), 0.0)
@@ -82,35 +82,11 @@ def test_push_cages_an_object_that_fits_between_the_fingers_unless_switched_off(
         session.config.push_cage = True
 
 
-def test_cheaper_twin_merges_other_objects_and_still_plans():
-    box = trimesh.creation.box(extents=(0.05, 0.05, 0.08))
-    halves = [trimesh.creation.box(extents=(0.05, 0.05, 0.04)) for _ in range(2)]
-    for half, z in zip(halves, (0.02, -0.02), strict=True):
-        half.apply_translation((0.0, 0.0, z))
-    T = np.eye(4)
-    T[:3, 3] = (0.0, 0.0, 0.04)
-    beside = T.copy()
-    beside[1, 3] = 0.12
-    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
-    config.settle_s, config.merge_other_objects, config.rest_creeping_every_step = 0.0, True, True
-    s = ManipulationSession(config, 0.01)
-    s.set_objects([TwinObject(1, T, box, halves), TwinObject(2, beside, box, halves)], 0.0)
-    outcome = _ask(s, target=1)
-    assert outcome.planned, outcome.message
-    parts_per_object = [len(o.convex_parts) for o in s._twin_objects(1)]
-    assert parts_per_object == [2, 1]
-    full = ManipulationSession(PlannerConfig(), 0.01)
-    full.set_objects(s.objects, 0.0)
-    full._ensure_twin(1)
-    assert s.twin.model.ngeom == full.twin.model.ngeom - 1
-    s.close()
-
-
 def test_a_grasp_the_gripper_cannot_hold_is_refused_as_infeasible_and_a_rearrange_pushes_it():
     wide = trimesh.creation.box(extents=(0.16, 0.15, 0.06))
     T = np.eye(4)
     T[:3, 3] = (0.0, 0.0, 0.03)
-    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), task_steps={})
+    config = PlannerConfig(mppi=MppiConfig(steps=5, nthread=1), push_steps=0, rearrange_steps=0, realtime_factor=0.0)
     config.settle_s = 0.0
     s = ManipulationSession(config, 0.01)
     try:

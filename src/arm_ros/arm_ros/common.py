@@ -15,6 +15,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
+from arm_core.settings import parameters_of, with_values
+
 
 def use_private_domain() -> int:
     """Put this process and the nodes it starts on a random DDS domain, unless ROS_DOMAIN_ID is set,
@@ -66,6 +68,15 @@ def declare(node, name: str, default, description: str, low=None, high=None, cho
     if choices and value not in choices:
         raise ValueError(f"parameter '{name}'='{value}' is not one of {choices}")
     return value
+
+
+def declare_settings(node, config):
+    """Declare the settings of a core's config dataclass that are marked as parameters
+    (arm_core.settings), with their descriptions and ranges; returns config with the values given."""
+    values = {
+        s.name: declare(node, s.name, s.value, s.description, s.low, s.high, s.choices) for s in parameters_of(config)
+    }
+    return with_values(config, values)
 
 
 PERCEPTION_NICENESS = 10

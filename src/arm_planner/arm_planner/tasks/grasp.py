@@ -15,14 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_planner.finger_clearance import (
-    DepthGrid,
-    FingerIntrusion,
-    OpenFingers,
-    clear_closing_axis,
-    hand_pointing_down,
-)
-from arm_planner.grasp_site import GraspTarget, Occupancy, find_grasp_site, search_grasp_site
+from arm_planner.finger_clearance import OpenFingers, clear_closing_axis
+from arm_planner.grasp_site import GraspTarget, find_grasp_site, search_grasp_site
 from arm_planner.tasks.base import (
     TaskReward,
     angle_down,
@@ -92,17 +86,11 @@ class GraspReward(TaskReward):
     search_grasp_site: bool = True
     grasp_site_moved: bool = False
     grasp_site_holds: bool = True  # False: neither the default site nor any other holds the target
-    # Coming down, the open fingers keep out of the target (as it stood at planning start) beyond
-    # how deep they stand in it at the grasp site plus this (m): a finger that lands on a tall or
-    # top-heavy target tips it over before the grip forms. Off with keep_fingers_off_target=False.
-    keep_fingers_off_target: bool = True
-    finger_depth_allowance_m: float = 0.004
     carry_phase: str = "lift"
     _history: list = field(default_factory=list)
     _closing_since: int = -1
     _closing_hold: np.ndarray | None = None  # where the hand holds while the fingers close (world, m)
     _grasped_since: int = 0
-    _finger_intrusion: FingerIntrusion | None = None
 
     def __post_init__(self):
         g = self.geometry
@@ -131,28 +119,9 @@ class GraspReward(TaskReward):
                 g.obstacle_halfspaces,
                 fits=lambda axis_xy: self._fits_between(axis_xy, self.fingers.gap_m),
             )
-        known = self.fingers is not None and self.fingers.known and g.part_halfspaces and len(g.vertices_world)
-        if self.keep_fingers_off_target and known:
-            voxel_m = 0.004
-            lo, hi = g.vertices_world.min(axis=0) - voxel_m, g.vertices_world.max(axis=0) + voxel_m
-            occupancy = Occupancy.from_parts(g.part_halfspaces, lo, hi, voxel_m)
-            self._finger_intrusion = FingerIntrusion(
-                self.fingers,
-                DepthGrid.from_filled(occupancy.origin_world, voxel_m, occupancy.filled),
-                self.grasp_point,
-                hand_pointing_down(self.closing_axis),
-                self.finger_depth_allowance_m,
-            )
         self._min_carry_height_m = self.carry_height_m
         if self.carry_height_m > 0:
             self.carry_height_m = self._clearing_height(g.bottom_z)
-
-    def finger_depth_penalty(self, hand_pos: np.ndarray, hand_rot: np.ndarray) -> np.ndarray:
-        """[...] how much deeper than allowed the open fingers of hands [..., 3] / [..., 3, 3] stand
-        in the target as it stood at planning start (m); 0 without the fingers or the target's parts."""
-        if self._finger_intrusion is None:
-            return np.zeros(np.shape(hand_pos)[:-1])
-        return self._finger_intrusion(hand_pos, hand_rot)
 
     def _grasp_target(self) -> GraspTarget:
         g = self.geometry
@@ -263,16 +232,13 @@ class GraspReward(TaskReward):
                     reach = reach - w.height * np.maximum(carry_z - target_pos[..., 2], 0.0)
             return reach - w.goal * np.linalg.norm(self.carry_goal(target_pos) - target_pos, axis=-1)
 
-        coming_down = self.state == "ungrasped"
-
         def score(pos, rot):
-            value = (
+            return (
                 -w.distance * np.linalg.norm(pos - grasp_point, axis=-1)
                 - w.height * self.funnel_penalty(pos, grasp_point)
                 - w.angle * angle_down(rot)
                 - w.yaw * yaw_error(rot, self.closing_axis)
             )
-            return value - w.height * self.finger_depth_penalty(pos, rot) if coming_down else value
 
         return self.blend(hands, score)
 

@@ -14,7 +14,7 @@ PARAMETER_CASES = [
     ("reconstruction", "method", "magic", "choice"),
     ("planner", "num_paths", 1, "range"),
     ("planner", "steps", "many", "type"),
-    ("planner", "execute_unmet", False, "combination"),  # needs stream false, which is true by default
+    ("planner", "execution", "sometimes", "choice"),
     ("sim", "n_objects", 99, "range"),
     ("sim", "split", "test", "choice"),
 ]
