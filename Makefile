@@ -11,10 +11,10 @@ demo: setup
 	@$(ENV) && demo $(ARGS)
 
 test: setup
-	@$(ENV) && python -m pytest -q -p no:cacheprovider src tests $(ARGS)
+	@$(ENV) && python -m pytest -q -p no:cacheprovider src lab tests $(ARGS)
 
 lint: setup
-	@$(ENV) && ruff check src tests scripts
+	@$(ENV) && ruff check src lab tests scripts
 
 bench-perf: setup
 	@$(ENV) && bench_perf $(ARGS)

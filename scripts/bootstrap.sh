@@ -32,9 +32,10 @@ fi
 export AMENT_PREFIX_PATH="$ROOT/.venv" CMAKE_PREFIX_PATH="$ROOT/.venv"
 export PATH="$ROOT/.venv/bin:$PATH"
 # Interface packages missing from the ROS 2 wheels (tf2_msgs, control_msgs) are built from compat/
-# with the same names and fields; each one the venv holds is left out. A workspace on a full ROS 2
-# install builds src/ alone and uses the real packages.
-base_paths=(src)
+# with the same names and fields; each one the venv holds is left out. src/ is the product, lab/ the
+# benchmarks and training. A robot's workspace on a full ROS 2 install builds src/ alone and uses the
+# real interface packages.
+base_paths=(src lab)
 for interfaces in tf2_msgs control_msgs; do
   env -u PYTHONPATH .venv/bin/python -c "import $interfaces" 2>/dev/null || base_paths+=("compat/$interfaces")
 done

@@ -13,7 +13,7 @@ workers=$(nproc)
 mkdir -p "$runs"
 realistic=$((train_shards * 4 / 5))
 gen() {
-  python -m arm_reconstruction.datagen --out "$data" --workers "$workers" ${RESOLUTION:+--resolution "$RESOLUTION"} \
+  python -m arm_training.reconstruction.datagen --out "$data" --workers "$workers" ${RESOLUTION:+--resolution "$RESOLUTION"} \
     "$@" | tail -n 3
 }
 if [[ "${GENERATE:-1}" != 0 ]]; then
@@ -29,7 +29,7 @@ declare -A extra=(
 )
 for variant in baseline arm-c-s arm-c arm; do
   # shellcheck disable=SC2086
-  python -m arm_reconstruction.train --variant "$variant" --data "$data" --device "${DEVICE:-cuda}" --threads 2 \
+  python -m arm_training.reconstruction.train --variant "$variant" --data "$data" --device "${DEVICE:-cuda}" --threads 2 \
     --base-channels "${BASE_CHANNELS:-24}" --batch-size 64 --lr 4e-4 --steps 200000 --time-limit-min "$minutes" \
     --eval-every 1000 --eval-samples 256 --final-eval-samples "${FINAL_EVAL_SAMPLES:-0}" --checkpoint-every 500 ${extra[$variant]} \
     ${INIT_DIR:+--init-from "$INIT_DIR/$variant.pt"} \

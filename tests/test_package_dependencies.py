@@ -12,7 +12,9 @@ import pytest
 import yaml
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = sorted(p.parent for p in (ROOT / "src").glob("*/package.xml") if (p.parent / "setup.py").is_file())
+PRODUCT = sorted(p.parent for p in (ROOT / "src").glob("*/package.xml") if (p.parent / "setup.py").is_file())
+LAB = sorted(p.parent for p in (ROOT / "lab").glob("*/package.xml") if (p.parent / "setup.py").is_file())
+PACKAGES = PRODUCT + LAB
 ROSDEP_KEYS = {  # Python module -> rosdep key
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
@@ -34,10 +36,12 @@ LOCAL_KEYS = ("python3-trimesh-pip", "python3-mujoco-pip", "python3-coacd-pip", 
               "python3-rosbags-pip")  # fmt: skip
 
 
-def imported_modules(package: pathlib.Path) -> set[str]:
-    """Top-level modules imported by the package's code (its Python package and launch files, not its tests)."""
+def imported_modules(package: pathlib.Path, with_tests: bool = False) -> set[str]:
+    """Top-level modules imported by the package's code (its Python package and launch files, and
+    with_tests its tests)."""
     modules = set()
-    files = [f for f in package.rglob("*.py") if f.relative_to(package).parts[0] not in ("test", "setup.py")]
+    left_out = ("setup.py",) if with_tests else ("test", "setup.py")
+    files = [f for f in package.rglob("*.py") if f.relative_to(package).parts[0] not in left_out]
     for path in files:
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):
@@ -79,10 +83,15 @@ def _is_ros_package(name: str) -> bool:
     )
 
 
-LAB_PACKAGES = {"arm_benchmarks"}  # benchmarks, their execution and tracking, run keys and statistics
+LAB_PACKAGES = {p.name for p in LAB}  # lab/: benchmarks, robustness harness, data generation and training
 
 
-@pytest.mark.parametrize("package", [p for p in PACKAGES if p.name not in LAB_PACKAGES], ids=lambda p: p.name)
+def test_the_lab_is_what_lab_holds():
+    assert LAB_PACKAGES == {"arm_benchmarks", "arm_training"}
+
+
+@pytest.mark.parametrize("package", PRODUCT, ids=lambda p: p.name)
 def test_no_product_package_imports_the_lab(package):
-    lab = imported_modules(package) & LAB_PACKAGES
+    """Neither a product package's code nor its tests import a lab package."""
+    lab = imported_modules(package, with_tests=True) & LAB_PACKAGES
     assert not lab, f"{package.name} imports {sorted(lab)}"

@@ -1,4 +1,3 @@
-
 from setuptools import find_packages, setup
 
 package_name = "arm_bags"
@@ -17,8 +16,10 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={"console_scripts": [
+    entry_points={
+        "console_scripts": [
             "record = arm_bags.record:main",
             "replay = arm_bags.replay:main",
-    ]},
+        ]
+    },
 )

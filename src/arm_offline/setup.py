@@ -16,7 +16,9 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={"console_scripts": [
+    entry_points={
+        "console_scripts": [
             "reconstruct_frames = arm_offline.reconstruct_frames:main",
-    ]},
+        ]
+    },
 )

@@ -20,8 +20,6 @@ setup(
     entry_points={
         "console_scripts": [
             "reconstruction_node = arm_reconstruction.reconstruction_node:main",
-            "datagen = arm_reconstruction.datagen:main",
-            "train = arm_reconstruction.train:main",
         ],
     },
 )

@@ -1,4 +1,3 @@
-
 from setuptools import find_packages, setup
 
 package_name = "arm_segmentation"
@@ -18,11 +17,9 @@ setup(
     maintainer_email="maintainers@arm-ros.dev",
     description=open("package.xml").read().split("<description>")[1].split("</description>")[0],
     license="Apache-2.0",
-    entry_points={"console_scripts": [
+    entry_points={
+        "console_scripts": [
             "segmentation_node = arm_segmentation.segmentation_node:main",
-            "seg_datagen = arm_segmentation.boundary_data:main",
-            "seg_train = arm_segmentation.boundary_train:main",
-            "seg_merge_train = arm_segmentation.merge_train:main",
-            "seg_outline_train = arm_segmentation.outline_train:main",
-    ]},
+        ]
+    },
 )

@@ -82,6 +82,14 @@ def load_preset(name: str) -> dict:
     parameters = camera.get("parameters") or {}
     if not isinstance(parameters, dict) or set(parameters) - set(NODE_KEYS):
         raise PresetError(f"{path}: parameters must be keyed by graph node ({', '.join(NODE_KEYS)})")
+    from arm_bringup.config_files import parameter_names  # imports every node's core: only when a preset is read
+
+    for key, values in parameters.items():
+        if not isinstance(values, dict):
+            raise PresetError(f"{path}: parameters of {key} must be a mapping of name: value")
+        unknown = sorted(set(values) - set(parameter_names(key)))
+        if unknown:
+            raise PresetError(f"{path}: {key} has no parameters {unknown}; it has {parameter_names(key)}")
     return {**camera, "remappings": dict(remappings), "parameters": parameters, "path": str(path)}
 
 

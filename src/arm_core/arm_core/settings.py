@@ -148,3 +148,25 @@ def add_arguments(parser: argparse.ArgumentParser, config, names=None) -> list[s
 def from_arguments(config, args: argparse.Namespace, names: list[str]):
     """config with the named settings (add_arguments' return) set from parsed args."""
     return with_values(config, {name: getattr(args, name) for name in names})
+
+
+@dataclass
+class GoalPauseSettings:
+    """How a perception node yields the CPU while the planner serves a goal (arm_ros.goal_activity)."""
+
+    pause_during_goals: bool = setting(
+        True,
+        "Hold camera frames back while the planner serves a goal (false for closed-loop re-planning)",
+        parameter=True,
+    )
+    manipulate_action: str = setting("arm/manipulate", "The planner's action, for pause_during_goals", parameter=True)
+    goal_pause_limit_s: float = setting(60.0, "Longest pause for one goal, s", 1.0, 3600.0, parameter=True)
+
+
+# Perception nodes run at Linux niceness 10: on a loaded machine planning and control, at 0, get the
+# CPU first and perception runs on what is left.
+PERCEPTION_NICENESS = 10
+
+
+def cpu_niceness_setting():
+    return setting(PERCEPTION_NICENESS, "Process CPU niceness (0: normal priority, 19: lowest)", 0, 19, parameter=True)

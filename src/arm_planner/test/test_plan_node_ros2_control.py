@@ -2,8 +2,8 @@
 for the gripper), served by the sim's controllers; the executed result reaches the goal's result."""
 
 import threading
-from dataclasses import replace
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 from gantry import GANTRY_SPEC, gantry_model
 
-from arm_benchmarks.perturbed_runs import holds_in_most
+from arm_core.majority import holds_in_most
 from arm_planner.mppi import MppiConfig, get_state
 from arm_planner.planner import Planner, PlannerConfig, PlanRequest
 from arm_planner.tasks.base import TargetGeometry

@@ -20,6 +20,8 @@ import manifold3d
 import numpy as np
 import trimesh
 
+from arm_core.settings import setting
+
 from .meshing import from_manifold, to_manifold
 
 SPLIT_FRACTIONS = (0.25, 0.5, 0.75)
@@ -35,8 +37,10 @@ class DecompositionSettings:
     simplify_tolerance_m: how far (metres) the 'planes' path may move the surface when it first
     simplifies the mesh (0 keeps every triangle)."""
 
-    max_parts: int = 8
-    max_vertices: int = 64
+    max_parts: int = setting(
+        8, "Convex parts per object at most (the planner's twin cost grows with them)", 1, 64, parameter=True
+    )
+    max_vertices: int = setting(64, "Hull vertices per convex part at most", 4, 256)
     concavity_tolerance: float = 0.05
     method: str = "planes"
     simplify_tolerance_m: float = 0.001

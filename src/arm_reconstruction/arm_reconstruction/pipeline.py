@@ -18,6 +18,7 @@ import trimesh
 
 from arm_core.camera import silhouette
 from arm_core.frames import validate_frame
+from arm_core.settings import setting
 
 from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
 from .colour import vertex_colours
@@ -119,23 +120,27 @@ class ReconstructionSettings:
     `snap`; complete_revolutions: an object whose seen points lie on an upright solid of revolution
     that agrees with the view becomes that solid (revolution)."""
 
-    method: str = "arm"
-    checkpoint_path: str = ""
-    device: str = "cpu"
-    resolution: int = 0
-    k: float = 0.0
-    threshold: float = DEFAULT_THRESHOLD
-    min_component_voxels: int = DEFAULT_MIN_COMPONENT_VOXELS
+    method: str = setting("arm", "Reconstruction method", choices=sorted(METHODS), parameter=True)
+    checkpoint_path: str = setting("", "Checkpoint file ('': the method's shipped checkpoint)", parameter=True)
+    device: str = setting("cpu", "Torch device", choices=("cpu", "cuda", "auto"), parameter=True)
+    resolution: int = setting(0, "Voxels per grid side (0: the checkpoint's)", 0, 256)
+    k: float = setting(0.0, "Grid side over the object's observed diameter (0: the checkpoint's)", 0.0, 16.0)
+    threshold: float = setting(DEFAULT_THRESHOLD, "Occupancy probability of a solid voxel", 0.01, 0.99, parameter=True)
+    min_component_voxels: int = setting(
+        DEFAULT_MIN_COMPONENT_VOXELS, "Drop occupied components smaller than this, voxels", 1, 4096
+    )
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
-    stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
-    join_parts: bool = True
-    snap_to_depth: bool = True
+    stable_base_tilt_deg: float = setting(
+        DEFAULT_STABLE_BASE_TILT_DEG, "A base, where unseen, for objects toppling at this tilt, deg (0: off)", 0.0, 45.0
+    )
+    join_parts: bool = setting(True, "Join an object's separate parts where the view allows (connectivity)")
+    snap_to_depth: bool = setting(True, "Place the seen part of each surface on the observed depth")
     snap: SnapSettings = field(default_factory=SnapSettings)
-    complete_revolutions: bool = True
+    complete_revolutions: bool = setting(True, "Complete upright solids of revolution from their seen side wall")
     revolution: RevolutionSettings = field(default_factory=RevolutionSettings)
-    remove_intersections: bool = True
+    remove_intersections: bool = setting(True, "Cut overlaps from the larger of two meshes (paper)")
     decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
-    estimate_visibility: bool = True
+    estimate_visibility: bool = setting(True, "Estimate each object's visible fraction")
     table_height_m: float | None = None
     batch_size: int = 16
     keep_probabilities: bool = False

@@ -23,91 +23,32 @@ from arm_core.frames import FrameInputError
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
 from arm_ros.common import (
     RateLimitedErrors,
-    declare,
-    declare_cpu_niceness,
+    declare_settings,
     diagnostics_msg,
     latched_qos,
+    lower_cpu_priority,
     run_node,
     sensor_qos,
 )
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg
-from arm_ros.goal_activity import declare_goal_pause
+from arm_ros.goal_activity import goal_pause
 from arm_ros.tf import TfPublisher
 
 from .checkpoint import CheckpointError
-from .convex_parts import DecompositionSettings
 from .messages import main_table_height, markers_msg, object_transforms, objects_to_msg
-from .network import METHODS
-from .pipeline import STAGES, ReconstructionPreempted, ReconstructionSettings, Reconstructor
+from .node_config import ReconstructionNodeConfig
+from .pipeline import STAGES, ReconstructionPreempted, Reconstructor
 
 
 class ReconstructionNode(Node):
     def __init__(self, **node_options):
         super().__init__("reconstruction_node", **node_options)
-        method = declare(self, "method", "arm", "Reconstruction method", choices=sorted(METHODS))
-        checkpoint = declare(self, "checkpoint_path", "", "Checkpoint file; '' = shipped checkpoint of the method")
-        device = declare(self, "device", "cpu", "Torch device", choices=["cpu", "cuda", "auto"])
-        resolution = declare(self, "resolution", 0, "Voxels per grid side; 0 = the checkpoint's", 0, 256)
-        k = declare(self, "k", 0.0, "Grid side over the object's observed diameter; 0 = the checkpoint's", 0.0, 16.0)
-        threshold = declare(self, "threshold", 0.5, "Occupancy probability of a solid voxel", 0.01, 0.99)
-        min_component = declare(self, "min_component_voxels", 4, "Drop occupied components smaller than this", 1, 4096)
-        cut = declare(self, "remove_intersections", True, "Cut overlaps from the larger of two meshes")
-        fixed_table = declare(self, "use_fixed_table_height", False, "Use table_height_m instead of estimating it")
-        table_height = declare(self, "table_height_m", 0.0, "Table plane height when fixed, metres", -10.0, 10.0)
-        decomposition = DecompositionSettings(
-            max_parts=declare(self, "decomposition.max_parts", 8, "Convex parts per object at most", 1, 64),
-            max_vertices=declare(self, "decomposition.max_vertices", 64, "Hull vertices per part at most", 4, 256),
-            concavity_tolerance=declare(
-                self, "decomposition.concavity_tolerance", 0.05, "Summed concavity / mesh volume", 0.0, 1.0
-            ),
-            method=declare(
-                self, "decomposition.method", "planes", "Convex decomposition", choices=["planes", "coacd", "hull"]
-            ),
-            simplify_tolerance_m=declare(
-                self, "decomposition.simplify_tolerance_m", 0.001, "Surface error before splitting, m", 0.0, 0.01
-            ),
-        )
-        stable_base = declare(
-            self, "stable_base_tilt_deg", 20.0, "Base for objects toppling at this tilt, deg; 0 = off", 0.0, 45.0
-        )
-        join = declare(self, "join_parts", True, "Join an object's separate parts where the view allows")
-        visibility = declare(self, "estimate_visibility", True, "Estimate each object's visible fraction")
-        snap = declare(self, "snap_to_depth", True, "Place the seen part of each surface on the observed depth")
-        revolutions = declare(
-            self, "complete_revolutions", True, "Complete upright solids of revolution from their seen side wall"
-        )
-        reliability = declare(
-            self,
-            "frame_reliability",
-            "reliable",
-            "QoS reliability of the frame subscription",
-            choices=["reliable", "best_effort"],
-        )
-        self.marker_alpha = declare(self, "marker_alpha", 0.8, "Marker opacity", 0.0, 1.0)
-        max_rate_hz = declare(
-            self, "max_rate_hz", 0.0, "Most frames reconstructed per second (wall clock); 0 = every frame", 0.0, 100.0
-        )
-        self.min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
-        self.cpu_niceness = declare_cpu_niceness(self)
-
-        settings = ReconstructionSettings(
-            method=method,
-            checkpoint_path=checkpoint,
-            device=device,
-            resolution=resolution,
-            k=k,
-            threshold=threshold,
-            min_component_voxels=min_component,
-            remove_intersections=cut,
-            decomposition=decomposition,
-            estimate_visibility=visibility,
-            snap_to_depth=snap,
-            complete_revolutions=revolutions,
-            stable_base_tilt_deg=stable_base,
-            join_parts=join,
-            table_height_m=table_height if fixed_table else None,
-        )
+        self.config = config = declare_settings(self, ReconstructionNodeConfig())
+        settings = config.reconstruction
+        self.marker_alpha = config.marker_alpha
+        self.min_period_s = 1.0 / config.max_rate_hz if config.max_rate_hz > 0 else 0.0
+        self.cpu_niceness = lower_cpu_priority(config.cpu_niceness)
         try:
             self.reconstructor = Reconstructor(settings)
         except CheckpointError as error:
@@ -118,7 +59,9 @@ class ReconstructionNode(Node):
         self.pub_markers = self.create_publisher(MarkerArray, "arm/meshes/markers", latched_qos())
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
         self.tf = TfPublisher(self)  # each object's frame object_<id>, for RViz and TF users
-        self.create_subscription(SegmentedFrame, "arm/segmented_frame", self.on_frame, sensor_qos(reliability, 1))
+        self.create_subscription(
+            SegmentedFrame, "arm/segmented_frame", self.on_frame, sensor_qos(config.frame_reliability, 1)
+        )
 
         self.received = self.processed = self.dropped = self.rejected = 0
         self.last_start_s = -float("inf")  # time.monotonic() when the last frame's reconstruction began
@@ -128,7 +71,7 @@ class ReconstructionNode(Node):
         self._stage_values: dict = {}
         self._status = (DiagnosticStatus.OK, "waiting for frames")
         self.create_timer(1.0, self.publish_diagnostics)
-        self.goals = declare_goal_pause(self, "frames", self._notify)
+        self.goals = goal_pause(self, config.goal_pause, self._notify)
         self.preempted = 0
         if self.goals is not None:  # a frame in progress when a goal comes is abandoned, redone after it
             self.reconstructor.should_stop = lambda: self.goals.seconds_left() > 0

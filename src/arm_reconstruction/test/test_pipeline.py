@@ -4,8 +4,7 @@ import torch
 
 from arm_core.camera import look_at
 from arm_core.frames import FrameInputError
-from arm_reconstruction.box_dataset import tiny_train_config, write_box_dataset
-from arm_reconstruction.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
 from arm_reconstruction.meshing import to_manifold
@@ -17,7 +16,6 @@ from arm_reconstruction.pipeline import (
     Reconstructor,
     reconstruct,
 )
-from arm_reconstruction.train import train
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
 from arm_sim.world import SimWorld
@@ -164,21 +162,3 @@ def test_one_call_api(sim, checkpoints):
     _, frame = sim
     objects = reconstruct(*args(frame), method="arm", checkpoint_path=str(checkpoints / "arm.pt"), threshold=0.5)
     assert len(objects) == len([i for i in np.unique(frame.labels) if i > 0])
-
-
-@pytest.mark.slow
-def test_checkpoint_from_the_project_trainer_runs_in_the_pipeline(sim, tmp_path):
-    write_box_dataset(tmp_path, "train", shards=1, per_shard=8, seed=0, k=3.0)
-    write_box_dataset(tmp_path, "test", shards=1, per_shard=4, seed=1, k=3.0)
-    train(tiny_train_config(tmp_path, tmp_path / "arm.pt", "arm", steps=2), progress=False)
-    _, frame = sim
-    reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt")))
-    assert reconstructor.resolution == 16 and reconstructor.checkpoint_config["base_channels"] == 8
-    assert reconstructor.k == 3.0, "the grid of the checkpoint's training data"
-    assert Reconstructor(ReconstructionSettings(checkpoint_path=str(tmp_path / "arm.pt"), k=2.5)).k == 2.5
-    model, _ = load_checkpoint(tmp_path / "arm.pt")
-    assert Reconstructor(ReconstructionSettings(), model=model).k == 3.0, "a loaded model carries its grid"
-    objects = reconstructor(*args(frame))
-    assert [o.id for o in objects] == sorted(int(i) for i in np.unique(frame.labels) if i > 0)
-    assert all(o.grid.resolution == 16 for o in objects)
-    assert all(o.ok or o.error for o in objects)

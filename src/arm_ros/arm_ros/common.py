@@ -79,20 +79,12 @@ def declare_settings(node, config):
     return with_values(config, values)
 
 
-PERCEPTION_NICENESS = 10
-
-
-def declare_cpu_niceness(node, default: int = PERCEPTION_NICENESS) -> int:
-    """Declare `cpu_niceness` and lower this process's CPU priority to it (Linux niceness 0-19; a
-    process can lower its own priority, not raise it). The perception nodes default to 10: on a loaded
-    machine the planner and the controller, at 0, get the CPU first and perception runs on what is
-    left. Returns the niceness in effect."""
-    value = declare(
-        node, "cpu_niceness", int(default), "Process CPU niceness (0 = normal priority, 19 = lowest)", 0, 19
-    )
+def lower_cpu_priority(niceness: int) -> int:
+    """Lower this process's CPU priority to `niceness` (Linux 0-19; a process can lower its own
+    priority, not raise it); returns the niceness in effect."""
     current = os.nice(0)
-    if value > current:
-        current = os.nice(value - current)
+    if niceness > current:
+        current = os.nice(niceness - current)
     return current
 
 

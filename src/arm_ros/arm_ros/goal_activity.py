@@ -12,8 +12,8 @@ import time
 from action_msgs.msg import GoalStatus, GoalStatusArray
 from rclpy.qos import qos_profile_action_status_default
 
+from arm_core.settings import GoalPauseSettings
 from arm_interfaces.action import Manipulate
-from arm_ros.common import declare
 
 ACTIVE_STATES = (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING, GoalStatus.STATUS_CANCELING)
 
@@ -66,11 +66,8 @@ class GoalActivity:
         return max(0.0, self.active_since_s + self.limit_s - time.monotonic())
 
 
-def declare_goal_pause(node, held_back: str, on_change=lambda: None) -> "GoalActivity | None":
-    """Declare pause_during_goals, manipulate_action and goal_pause_limit_s on `node`; the tracker of
-    the planner's goals when pausing is on, else None. held_back: what the node holds back, for the
-    parameter's description."""
-    pause = declare(node, "pause_during_goals", True, f"Hold {held_back} back while the planner serves a goal")
-    action = declare(node, "manipulate_action", "arm/manipulate", "The planner's action, for pause_during_goals")
-    limit_s = declare(node, "goal_pause_limit_s", 60.0, "Longest pause for one goal, s", 1.0, 3600.0)
-    return GoalActivity(node, action, limit_s, on_change) if pause else None
+def goal_pause(node, settings: GoalPauseSettings, on_change=lambda: None) -> "GoalActivity | None":
+    """The tracker of the planner's goals when settings.pause_during_goals is on, else None."""
+    if not settings.pause_during_goals:
+        return None
+    return GoalActivity(node, settings.manipulate_action, settings.goal_pause_limit_s, on_change)

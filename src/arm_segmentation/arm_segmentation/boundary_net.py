@@ -5,9 +5,8 @@ printed label from a different object. The network looks at colour, depth, norma
 the support together and predicts, per working-grid pixel, the probability that the pixel lies where
 two objects meet (an outline between objects) and that it lies on an object at all.
 
-- Outline channel (BoundaryParams.enabled, off by default): the clustering cuts fragments along its
-  ridges and keeps fragments apart whose contact lies on it. With the shipped weights it gains on
-  the realistic benchmark and loses about 0.01 overlap F on the plain one (docs/experiments.md).
+- Outline channel: a feature of the learned merging of touching fragments (merge_model) and of the
+  outline pass (outline_model).
 - Object channel (BoundaryParams.fill_objects, on by default): unlabelled pixels it scores above
   fill_threshold near an instance join the nearest instance: flat bases in the table band and
   surfaces without depth, which geometry leaves out.
@@ -60,16 +59,6 @@ def boundary_targets(labels: np.ndarray, radius_px: int = 1) -> np.ndarray:
     return (labels > 0) & ((high != as_float) | (low != as_float))
 
 
-def outline_ridges(probability: np.ndarray, threshold: float) -> np.ndarray:
-    """HxW bool: pixels above threshold that are a local maximum of the outline probability across
-    the band, horizontally or vertically (the band thinned to its ridge, one or two pixels wide)."""
-    p = np.asarray(probability, dtype=np.float32)
-    padded = np.pad(p, 1, mode="edge")
-    ridge_x = (p >= padded[1:-1, :-2]) & (p >= padded[1:-1, 2:])
-    ridge_y = (p >= padded[:-2, 1:-1]) & (p >= padded[2:, 1:-1])
-    return (p > threshold) & (ridge_x | ridge_y)
-
-
 def build_network(width: int = 8):
     """The boundary U-Net: one convolution at full working resolution on either side, double
     convolutions at 1/2, 1/4 and 1/8 (widths 2, 4 and 4 x `width`)."""
@@ -114,14 +103,10 @@ def build_network(width: int = 8):
 
 @dataclass(frozen=True)
 class BoundaryParams:
-    """enabled: use the network's outline channel when its weights load; threshold: outline
-    probability above which a ridge of it separates fragments (how merging uses it:
-    ClusterParams.outline_*); fill_objects: use its object channel, giving unlabelled pixels above
-    fill_threshold within fill_reach_px (full resolution) of an instance to the nearest instance;
-    checkpoint: weights file ('' = the shipped one)."""
+    """fill_objects: use the network (its weights loading) and its object channel, giving unlabelled
+    pixels above fill_threshold within fill_reach_px (full resolution) of an instance to the nearest
+    instance; checkpoint: weights file ('' = the shipped one)."""
 
-    enabled: bool = False
-    threshold: float = 0.5
     fill_objects: bool = True
     fill_threshold: float = 0.9
     fill_reach_px: int = 20
@@ -129,7 +114,7 @@ class BoundaryParams:
 
     @property
     def network_used(self) -> bool:
-        return self.enabled or self.fill_objects
+        return self.fill_objects
 
 
 class BoundaryPredictor:

@@ -236,9 +236,7 @@ def estimate_camera_pose(
         )
     planes = support_planes(points, params, rng)
     if not planes or max(inliers.mean() for _, inliers in planes) < params.min_inlier_fraction:
-        raise CameraPoseError(
-            f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels"
-        )
+        raise CameraPoseError(f"no plane holds {params.min_inlier_fraction:.0%} of the {n_valid} valid depth pixels")
     u, v = pixel_coordinates(points, K)
     problems = [plane_problem(plane, params) for plane, _ in planes]
     usable = [

@@ -23,6 +23,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from arm_core.settings import setting
 from arm_segmentation.label_stats import label_maximum, label_minimum
 
 # Rings the last flood grows into geometric edge pixels: wider than the band separating_edges marks.
@@ -38,7 +39,7 @@ class ClusterParams:
     depth_jump_per_m: float = 0.012
     concave_threshold: float = 0.35
     crease_reach: int = 3  # creases are also looked for between pixels this many steps apart (a sensor rounds them)
-    use_colour: bool = True
+    use_colour: bool = setting(True, "Use colour cues (false: geometry only)")
     chroma_edge_threshold: float = 0.15
     merge_chroma_threshold: float = 0.16
     contact_radius_px: int = 2
@@ -46,7 +47,7 @@ class ClusterParams:
     small_fragment_tolerance: float = 1.6
     min_contact_px: int = 3
     min_fragment_px: int = 3
-    min_instance_area_m2: float = 3e-4
+    min_instance_area_m2: float = setting(3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
     flood_iterations: int = 20
     flood_chroma_threshold: float = 0.6
     flood_strict_chroma_threshold: float = 0.25  # first flood pass: fragments claim their own colour (0: off)
@@ -57,9 +58,6 @@ class ClusterParams:
     geometric_min_contact_px: int = 6
     geometric_contact_share: float = 0.5  # of all their contacts
     geometric_edge_px: int = 1  # pixels this near a depth jump or a concave crease are no smooth contact
-    outline_separate: float = 0.7  # fragments whose contacts' mean learned outline probability is above stay apart
-    outline_inside: float = 0.1  # ... and below it merge at colour distances up to outline_inside_chroma
-    outline_inside_chroma: float = 0.5
     resting_height_m: float = 0.02  # a fragment reaching this near its support rests on it
     thick_fragment_m: float = 0.02  # radius of the widest disc inside a fragment that could be an object
     max_instances: int = 255
@@ -197,11 +195,6 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
     return np.stack([unique // big, unique % big], axis=1), counts
 
 
-def contact_outline(counts: np.ndarray) -> np.ndarray:
-    """(P,) mean outline probability over each pair's contacts (fragment_contacts' counts)."""
-    return counts[:, 4] / np.maximum(counts[:, :3].sum(axis=1), 1.0)
-
-
 def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: int, max_chroma: float) -> np.ndarray:
     """Grow labels into the unlabelled pixels of mask, one 8-connected ring per iteration.
 
@@ -242,15 +235,11 @@ def _should_merge(counts: np.ndarray, params: ClusterParams) -> np.ndarray:
 
 
 def _agglomerate(
-    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, use_outline: bool = False,
-    scorer=None,
-) -> np.ndarray:  # fmt: skip
+    labels, n, pairs, counts, chroma, params: ClusterParams, max_rounds: int = 64, scorer=None
+) -> np.ndarray:
     """Region merging: each round joins the mutually most similar mergeable neighbours, then the
     merged regions' mean colours and contact counts are recomputed, so a chain of small colour
-    steps does not join two objects of different colour. use_outline (counts carry the summed
-    outline probability): regions whose contacts' mean probability exceeds params.outline_separate
-    never merge, and those below params.outline_inside merge up to colour distance
-    params.outline_inside_chroma. scorer (merge_model.LearnedMerge, started on labels): touching
+    steps does not join two objects of different colour. scorer (merge_model.LearnedMerge, started on labels): touching
     regions merge when its probability exceeds its threshold, most probable first, instead of by
     colour. Returns the region of each label 0..n."""
     flat = labels.ravel()
@@ -281,15 +270,6 @@ def _agglomerate(
             small = np.minimum(size[ra], size[rb]) < params.small_fragment_px
             limit = params.merge_chroma_threshold * np.where(small, params.small_fragment_tolerance, 1.0)
             ok = _should_merge(region_counts, params) & (distance <= limit)
-        if use_outline:
-            mean_outline = contact_outline(region_counts)
-            ok &= mean_outline <= params.outline_separate
-            if scorer is None:  # the classifier weighs the outline itself
-                touching = region_counts[:, 0] + region_counts[:, 2] >= params.min_contact_px
-                sure_inside = touching & (mean_outline < params.outline_inside)
-                sure_inside &= distance <= params.outline_inside_chroma
-                ok |= sure_inside & (mean_outline <= params.outline_separate)
-                distance = np.where(sure_inside, 0.0, distance)  # sure insides first
         if not np.any(ok):
             break
         if scorer is not None:
@@ -332,19 +312,17 @@ def widest_disc_m(labels: np.ndarray, n: int, area_m2: np.ndarray) -> np.ndarray
     return label_maximum(radius_m, labels, n)
 
 
-def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams, outline=None) -> np.ndarray:
+def merge_geometric(labels, n, depth_m, smooth, height_m, area_m2, params: ClusterParams) -> np.ndarray:
     """Join fragments that meet mostly on one smooth surface (continuous depth, no concave crease,
     both sides above their support) when one of them cannot be an object on its own: it does not
     reach down to the support (a label, the upper part of a print) or it is thin (a stripe, a
     band). Two thick fragments that both rest on the support (boxes standing flush) stay apart,
     whatever the geometry; colour separates them."""
-    pairs, counts = fragment_contacts(labels, depth_m, params, smooth, outline)
+    pairs, counts = fragment_contacts(labels, depth_m, params, smooth)
     if not len(pairs):
         return labels
     total = counts[:, :3].sum(axis=1)
     join = (counts[:, 3] >= params.geometric_min_contact_px) & (counts[:, 3] >= params.geometric_contact_share * total)
-    if outline is not None:
-        join &= contact_outline(counts) <= params.outline_separate
     low = label_minimum(np.where(smooth, height_m, np.inf), labels, n)
     floating = np.asarray(low) > params.resting_height_m
     thin = widest_disc_m(labels, n, area_m2) < params.thick_fragment_m
@@ -379,32 +357,28 @@ def _join_to_one_anchor(n: int, pairs: np.ndarray, contact: np.ndarray, alone: n
 
 def merge_fragments(
     labels, n, depth_m, chroma, area_m2, params: ClusterParams, smooth=None, height_m=None, pixel_area_m2=None,
-    outline=None, scorer=None,
+    scorer=None,
 ) -> np.ndarray:  # fmt: skip
     """Merge fragments into objects (see the module docstring). Returns labels (0 = none).
 
     smooth: HxW bool, pixels away from geometric edges, and height_m: HxW height above the support
     (m), and pixel_area_m2 (HxW surface area of every pixel), fragments meeting on a smooth surface
-    merge first (merge_geometric). outline: HxW float, the boundary network's outline probability;
-    fragments whose contacts lie mostly on an outline stay apart, those meeting where it is sure there
-    is none merge across moderate colour differences (_agglomerate). scorer: a merge_model.LearnedMerge
+    merge first (merge_geometric). scorer: a merge_model.LearnedMerge
     that decides, after the smooth-surface rule, which touching regions merge instead of their colour
     (its contacts carry its own outline probability and the smooth contacts)."""
     if n == 0:
         return labels
     if smooth is not None and height_m is not None and pixel_area_m2 is not None and params.geometric_merge:
-        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params, outline)
+        labels = merge_geometric(labels, n, depth_m, smooth, height_m, pixel_area_m2, params)
         n = int(labels.max())
     if scorer is not None:
-        contact_outline_map = outline if outline is not None else scorer.outline
-        pairs, counts = fragment_contacts(labels, depth_m, params, smooth, contact_outline_map)
+        pairs, counts = fragment_contacts(labels, depth_m, params, smooth, scorer.outline)
         scorer.start(labels, n)
     else:
-        pairs, counts = fragment_contacts(labels, depth_m, params, outline=outline)
+        pairs, counts = fragment_contacts(labels, depth_m, params)
     if len(pairs) and params.use_colour:
         if params.agglomerative or scorer is not None:
-            use_outline = outline is not None
-            component = _agglomerate(labels, n, pairs, counts, chroma, params, use_outline=use_outline, scorer=scorer)
+            component = _agglomerate(labels, n, pairs, counts, chroma, params, scorer=scorer)
         else:
             means = _region_means(labels, n, chroma)
             colour_distance = np.abs(means[pairs[:, 0]] - means[pairs[:, 1]]).sum(axis=1)
@@ -494,15 +468,11 @@ def cluster_instances(
     table_chroma: np.ndarray | None = None,
     params: ClusterParams = ClusterParams(),
     height_m: np.ndarray | None = None,
-    outline: np.ndarray | None = None,
-    outline_edges: np.ndarray | None = None,
     scorer=None,
 ) -> np.ndarray:
     """Instance labels (uint16 HxW, 0 = not an object).
 
     height_m: HxW height of each pixel above its support level (m), for merge_geometric.
-    outline: HxW float, the boundary network's outline probability (steers merging, merge_fragments);
-    outline_edges: HxW bool, its ridges: separating edges like depth jumps.
     scorer: merge_model.LearnedMerge on this grid: the learned merging of touching regions.
     object_mask: pixels with geometric evidence of an object (above a support plane).
     candidate_mask: further pixels that may belong to objects (no depth, or in the table band)
@@ -512,9 +482,6 @@ def cluster_instances(
     edge, geometric = separating_edges(
         points_camera, normals_camera, depth_m, chroma if params.use_colour else None, mask, normal_valid, params
     )
-    if outline_edges is not None:
-        edge |= outline_edges & mask
-        geometric |= outline_edges & mask
     fragments, n = ndimage.label(mask & ~edge)
     if n == 0:
         return np.zeros(mask.shape, dtype=np.uint16)
@@ -547,9 +514,7 @@ def cluster_instances(
     near_edge = cv2.dilate(geometric.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
     smooth = object_mask & ~near_edge
     n = int(fragments.max())
-    labels = merge_fragments(
-        fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, outline, scorer
-    )
+    labels = merge_fragments(fragments, n, depth_m, chroma, evidence, params, smooth, height_m, area_m2, scorer)
     grow_table = table_chroma if params.use_colour else None
     labels = grow_instances(labels, depth_m, chroma, mask, grow_table, params)
     return _relabel_by_size(labels, params.max_instances)

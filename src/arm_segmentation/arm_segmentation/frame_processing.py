@@ -62,8 +62,13 @@ def undistorted_info(info_msg: CameraInfo) -> CameraInfo:
 
 
 def segment_frame(
-    frame: RgbdFrame, depth_msg: Image, info_msg: CameraInfo, pose_msg: PoseStamped,
-    labels_msg: Image | None = None, params: SegmentationParams | None = None, exclude_fn: Callable | None = None,
+    frame: RgbdFrame,
+    depth_msg: Image,
+    info_msg: CameraInfo,
+    pose_msg: PoseStamped,
+    labels_msg: Image | None = None,
+    params: SegmentationParams | None = None,
+    exclude_fn: Callable | None = None,
 ) -> tuple[SegmentedFrame, Image]:
     """A decoded frame whose T_world_camera is known (pose_msg carries it) -> (SegmentedFrame, overlay
     rgb8 Image). With labels_msg (ground-truth masks) the labels are passed through instead of

@@ -97,9 +97,9 @@ def outline_features(labels: np.ndarray, image: OutlineImage, band: OutlineBand)
     pixel = np.asarray(image.rgb[r, c], np.float32) / 255.0
     inside, outside, blurred = image.colour[ir, ic], image.colour[orow, ocol], image.colour[r, c]
     covered = (labels > 0).astype(np.uint8)
-    signed = cv2.distanceTransform(covered, cv2.DIST_L2, 3)[r, c] - cv2.distanceTransform(
-        1 - covered, cv2.DIST_L2, 3
-    )[r, c]
+    signed = (
+        cv2.distanceTransform(covered, cv2.DIST_L2, 3)[r, c] - cv2.distanceTransform(1 - covered, cv2.DIST_L2, 3)[r, c]
+    )
     d, d_in, d_out = image.depth_m[r, c], image.depth_m[ir, ic], image.depth_m[orow, ocol]
     has, has_in, has_out = d > 0, d_in > 0, d_out > 0
 

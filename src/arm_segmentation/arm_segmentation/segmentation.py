@@ -12,6 +12,7 @@ from scipy import ndimage
 from arm_core.boxes import mask_box
 from arm_core.camera import backproject_image, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
+from arm_core.settings import setting
 from arm_segmentation.boundary import (
     BorderParams,
     grow_into_objectness,
@@ -19,7 +20,7 @@ from arm_segmentation.boundary import (
     nearest_pixel,
     refine_borders,
 )
-from arm_segmentation.boundary_net import BoundaryParams, boundary_features, outline_ridges, shared_predictor
+from arm_segmentation.boundary_net import BoundaryParams, boundary_features, shared_predictor
 from arm_segmentation.clustering import ClusterParams, chromaticity, cluster_instances, hue_distance
 from arm_segmentation.fragments import FragmentParams, absorb_fragments
 from arm_segmentation.geometry import preprocess_depth
@@ -75,9 +76,7 @@ class SegmentationParams:
     """All parameters of the default method. Pixel sizes refer to the working resolution: the
     input subsampled by working_stride (2: a 640x480 frame is processed at 320x240)."""
 
-    working_stride: int = 2
-    workspace_min_m: tuple[float, float, float] = (-np.inf, -np.inf, -np.inf)  # world-frame crop box;
-    workspace_max_m: tuple[float, float, float] = (np.inf, np.inf, np.inf)  # object points outside are ignored
+    working_stride: int = setting(2, "Subsampling of the working grid (1: full resolution)", 1, 4)
 
     fill_radius_px: int = 1
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
@@ -177,19 +176,7 @@ def _geometry(depth, K, T, params: SegmentationParams, step_px: int, levels, sup
     if support is None:
         support = support_heights(points_world, smoothed, levels, params.table)
     table, objects = classify_heights(points_world[..., 2], smoothed, support, params.table)
-    inside = in_workspace(points_world, params)
-    if inside is not None:
-        objects &= inside
     return _Stage(smoothed, points_camera, normals_camera, valid, points_world, area, support, table, objects, levels)
-
-
-def in_workspace(points_world: np.ndarray, params: SegmentationParams) -> np.ndarray | None:
-    """HxW bool: points (HxWx3, world frame, m) inside the workspace box; None when it is unbounded."""
-    if not (np.isfinite(params.workspace_min_m).any() or np.isfinite(params.workspace_max_m).any()):
-        return None
-    lo = np.asarray(params.workspace_min_m, dtype=np.float32)
-    hi = np.asarray(params.workspace_max_m, dtype=np.float32)
-    return np.all((points_world >= lo) & (points_world <= hi), axis=-1)
 
 
 def missing_over_table(depth_m, K, T, levels, params: OccluderParams) -> np.ndarray:
@@ -224,14 +211,11 @@ def _colour(stage: _Stage, rgb, K, T, params: SegmentationParams, window_px: int
     return stage
 
 
-def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, outline=None, scorer=None):
-    """outline: None, or the outline probability on stage's grid (learned_outline); scorer: None, or
-    the learned merging on stage's grid (merge_scorer)."""
-    ridges = None if outline is None else outline_ridges(outline, params.boundary.threshold)
+def _cluster(stage: _Stage, cluster: ClusterParams, params: SegmentationParams, scorer=None):
+    """scorer: None, or the learned merging on stage's grid (merge_scorer)."""
     labels = cluster_instances(
         stage.points_camera, stage.normals_camera, stage.smoothed, stage.chroma, stage.objects, stage.candidates,
-        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, outline,
-        ridges, scorer,
+        stage.valid, stage.area, stage.table_chroma, cluster, stage.points_world[..., 2] - stage.support, scorer,
     )  # fmt: skip
     return drop_support_structure(labels, stage.points_world, stage.smoothed, stage.support, stage.levels, params.table)
 
@@ -334,7 +318,6 @@ def segment_detailed(
     stride = params.working_stride
     rgb, depth, K, stage = working_stage(rgb_full, depth_full, K_full, T, params)
     maps = learned_maps(rgb, stage, params.boundary)
-    outline = maps[0] if maps is not None and params.boundary.enabled else None
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
         K_crop = K_full.copy()
@@ -345,11 +328,10 @@ def segment_detailed(
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
         radii_px = params.fine.candidate_radius_px, params.fine.missing_candidate_radius_px
         _colour(fine, rgb_full[crop], K_crop, T, params, params.fine.table_colour_window_px, radii_px)
-        fine_outline = None if outline is None else _upsampled_crop(outline, crop, stride, depth_full.shape)
         feature_outline = None if maps is None else _upsampled_crop(maps[0], crop, stride, depth_full.shape)
         scorer = merge_scorer(fine, rgb_full[crop], feature_outline, cluster, crop, params, merge_factory)
         labels = np.zeros(depth_full.shape, dtype=np.uint16)
-        labels[crop] = _cluster(fine, cluster, params, fine_outline, scorer)
+        labels[crop] = _cluster(fine, cluster, params, scorer)
         table = upsample(stage.table, stride, depth_full.shape)
         table[crop] = fine.table
     else:
@@ -358,7 +340,7 @@ def segment_detailed(
         grid = (slice(None, None, stride), slice(None, None, stride))
         feature_outline = None if maps is None else maps[0]
         scorer = merge_scorer(stage, rgb, feature_outline, params.cluster, grid, params, merge_factory)
-        labels = _cluster(stage, params.cluster, params, outline, scorer)
+        labels = _cluster(stage, params.cluster, params, scorer)
         table = stage.table
         if stride > 1:
             labels = refine_full_resolution(
@@ -381,8 +363,7 @@ def segment_detailed(
     outline_classifier = shared_outline_classifier(params.outline)
     objectness = None
     if maps is not None and (params.boundary.fill_objects or outline_classifier is not None):
-        inside = in_workspace(stage.points_world, params)
-        objectness = upsample_linear(maps[1] if inside is None else maps[1] * inside, stride, depth_full.shape)
+        objectness = upsample_linear(maps[1], stride, depth_full.shape)
     if objectness is not None and params.boundary.fill_objects:
         labels = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
     if objectness is not None and outline_classifier is not None:

@@ -23,21 +23,26 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState, PointCloud2
 
 from arm_interfaces.msg import SegmentedFrame
-from arm_ros.common import RateLimitedErrors, declare, declare_cpu_niceness, diagnostics_msg, run_node, sensor_qos
+from arm_ros.common import (
+    RateLimitedErrors,
+    declare_settings,
+    diagnostics_msg,
+    lower_cpu_priority,
+    run_node,
+    sensor_qos,
+)
 from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
-from arm_ros.goal_activity import declare_goal_pause
+from arm_ros.goal_activity import goal_pause
 from arm_ros.tf import TfPublisher, tf_listener
-from arm_segmentation.boundary_net import BoundaryParams, shared_predictor
+from arm_segmentation.boundary_net import shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
-from arm_segmentation.clustering import ClusterParams
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, object_cloud, segment_frame
-from arm_segmentation.merge_model import MergeParams, shared_classifier
-from arm_segmentation.outline_model import OutlineParams, shared_outline_classifier
+from arm_segmentation.merge_model import shared_classifier
+from arm_segmentation.node_config import SegmentationNodeConfig
+from arm_segmentation.outline_model import shared_outline_classifier
 from arm_segmentation.pose_tracking import CameraPoseTracker
-from arm_segmentation.segmentation import SegmentationParams
 from arm_segmentation.self_filter import SelfFilterParams, arm_positions, base_pose, self_mask
 from arm_segmentation.synchronizer import ApproximateTimeSynchronizer
-from arm_segmentation.table_plane import TableParams
 
 TOPICS = {
     "rgb": (Image, "camera/color/image_raw"),
@@ -56,117 +61,36 @@ def stamp_s(msg) -> float:
 class SegmentationNode(Node):
     def __init__(self):
         super().__init__("segmentation_node")
-        self.use_ground_truth = declare(
-            self, "use_ground_truth_masks", False, "Pass the simulator's label image through instead of segmenting"
-        )
-        self.cpu_niceness = declare_cpu_niceness(self)
-        slop_s = declare(self, "sync_tolerance_s", 0.02, "Largest stamp difference within one frame, seconds", 0.0, 1.0)
-        queue = declare(self, "sync_queue_size", 5, "Messages kept per input while matching stamps", 1, 50)
-        pose_source = declare(
-            self,
-            "camera_pose_source",
-            "topic",
-            "T_world_camera from camera/pose (topic), from /tf between world_frame and the depth image's "
-            "frame (tf), or estimated from the depth's table plane (estimate: published on /tf as the "
-            "frame 'table' under the camera)",
-            choices=["topic", "tf", "estimate"],
-        )
-        self.world_frame = declare(
-            self, "world_frame", "world", "With camera_pose_source tf: the gravity-aligned frame (z up) to plan in"
-        )
-        self.camera_frame = declare(
-            self,
-            "camera_frame",
-            "",
-            "The camera's optical frame for /tf (the camera presets set the driver's); '': each depth image's frame_id",
-        )
-        reliability = declare(
-            self,
-            "image_reliability",
-            "best_effort",
-            "Subscription QoS reliability",
-            choices=["best_effort", "reliable"],
-        )
-        stride = declare(self, "working_stride", 2, "Subsampling of the working grid (1 = full resolution)", 1, 4)
-        min_table = declare(
-            self,
-            "min_table_area_m2",
-            TableParams().min_table_area_m2,
-            "Smallest horizontal plane taken as a table, m^2",
-            0.005,
-            10.0,
-        )
-        max_height = declare(self, "max_object_height_m", 0.6, "Tallest object above its table, metres", 0.02, 3.0)
-        min_area = declare(self, "min_instance_area_m2", 3e-4, "Smallest visible object surface, m^2", 0.0, 0.1)
-        use_colour = declare(self, "use_colour", True, "Use colour cues (off: geometry only)")
-        workspace_min = declare(
-            self,
-            "workspace_min_m",
-            [-100.0, -100.0, -100.0],
-            "World-frame box (lower corner, metres) outside which nothing is an object",
-        )
-        workspace_max = declare(
-            self,
-            "workspace_max_m",
-            [100.0, 100.0, 100.0],
-            "World-frame box (upper corner, metres) outside which nothing is an object",
-        )
-        if len(workspace_min) != 3 or len(workspace_max) != 3:
-            raise ValueError("workspace_min_m and workspace_max_m must have 3 values each")
-        defaults = BoundaryParams()
-        boundary = BoundaryParams(
-            enabled=declare(self, "boundary_network", False, "Use the learned object-outline cue (weights shipped)"),
-            threshold=declare(self, "boundary_threshold", 0.5, "Outline probability separating objects", 0.05, 0.95),
-            fill_objects=declare(self, "object_fill", defaults.fill_objects, "Give object-like pixels to instances"),
-            fill_threshold=declare(
-                self, "object_fill_threshold", defaults.fill_threshold, "Object probability for object_fill", 0.5, 0.99
-            ),
-            checkpoint=declare(self, "boundary_checkpoint", "", "Boundary network weights ('' = the shipped ones)"),
-        )
+        self.config = config = declare_settings(self, SegmentationNodeConfig())
+        self.use_ground_truth = config.use_ground_truth_masks
+        self.cpu_niceness = lower_cpu_priority(config.cpu_niceness)
+        self.world_frame, self.camera_frame = config.world_frame, config.camera_frame
+        self.params = params = config.segmentation
         try:  # loaded now: a bad checkpoint fails at start with one clear line, not per frame
-            predictor = shared_predictor(boundary)
+            predictor = shared_predictor(params.boundary)
         except (FileNotFoundError, ValueError) as error:
-            raise ValueError(f"boundary_checkpoint: {error}") from error
-        threads = declare(self, "torch_threads", 1, "CPU threads of the boundary network", 1, 64)
+            raise ValueError(f"boundary network: {error}") from error
         if predictor is not None:
             # One thread: on a loaded machine a niced process's extra OpenMP threads wait on each other
             # (a 2-thread network took the frame from about 0.12 s to 0.7 s in the running graph).
             import torch
 
-            torch.set_num_threads(threads)
+            torch.set_num_threads(1)
         self.get_logger().info(
             f"boundary network: {predictor.path}" if predictor else "boundary network off: geometric and colour cues"
         )
-        merge = MergeParams(
-            enabled=declare(self, "merge_classifier", True, "Merge touching fragments by the learned classifier"),
-            threshold=declare(self, "merge_threshold", 0.5, "Probability above which fragments merge", 0.05, 0.95),
-            checkpoint=declare(self, "merge_checkpoint", "", "Merge classifier weights ('' = the shipped ones)"),
-        )
-        self._load_classifier(shared_classifier, merge, "merge", "merging by colour", predictor)
-        outline = OutlineParams(
-            enabled=declare(self, "outline_classifier", True, "Decide outline pixels by the learned classifier"),
-            checkpoint=declare(self, "outline_checkpoint", "", "Outline classifier weights ('' = the shipped ones)"),
-        )
-        self._load_classifier(shared_outline_classifier, outline, "outline", "outlines by colour", predictor)
-        self.params = SegmentationParams(
-            boundary=boundary,
-            merge=merge,
-            outline=outline,
-            working_stride=stride,
-            workspace_min_m=tuple(float(v) for v in workspace_min),
-            workspace_max_m=tuple(float(v) for v in workspace_max),
-            table=TableParams(min_table_area_m2=min_table, max_object_height_m=max_height),
-            cluster=ClusterParams(min_instance_area_m2=min_area, use_colour=use_colour),
-        )
+        self._load_classifier(shared_classifier, params.merge, "merge", "merging by colour", predictor)
+        self._load_classifier(shared_outline_classifier, params.outline, "outline", "outlines by colour", predictor)
+        pose_source, slop_s = config.camera_pose_source, config.sync_tolerance_s
         self.tracker = CameraPoseTracker() if pose_source == "estimate" else None
         self.tf_listener = tf_listener(self) if pose_source == "tf" else None
         self.tf = TfPublisher(self)
         self.inputs = ["rgb", "depth", "camera_info"] + (["pose"] if pose_source == "topic" else [])
         self.inputs += ["labels"] if self.use_ground_truth else []
-        self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, queue)
+        self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, config.sync_queue_size)
         self.errors = RateLimitedErrors(self.get_logger())
-        self._declare_self_filter()
-        qos = sensor_qos(reliability, depth=1)
+        self._start_self_filter(config)
+        qos = sensor_qos(config.image_reliability, depth=1)
         for index, name in enumerate(self.inputs):
             msg_type, topic = TOPICS[name]
             self.create_subscription(msg_type, topic, lambda msg, i=index: self.on_message(i, msg), qos)
@@ -182,7 +106,7 @@ class SegmentationNode(Node):
         self.last_empty_reason = ""
         self.last_error = ""
         self.messages_skipped_for_goals = 0
-        self.goals = declare_goal_pause(self, "camera frames")
+        self.goals = goal_pause(self, config.goal_pause)
         self.create_timer(1.0, self.publish_diagnostics)
         mode = "ground-truth masks" if self.use_ground_truth else "segmentation"
         self.get_logger().info(
@@ -190,28 +114,19 @@ class SegmentationNode(Node):
         )
 
     def _load_classifier(self, shared, params, name: str, fallback: str, predictor) -> None:
-        """Load a learned classifier now, so a bad `<name>_checkpoint` fails at start with one clear
-        line, not per frame; warn when it will not run for want of the boundary network's maps."""
+        """Load a learned classifier now, so bad weights fail at start with one clear line, not per
+        frame; warn when it will not run for want of the boundary network's maps."""
         try:
             classifier = shared(params)
         except (FileNotFoundError, ValueError) as error:
-            raise ValueError(f"{name}_checkpoint: {error}") from error
+            raise ValueError(f"{name} classifier: {error}") from error
         if classifier is not None and predictor is None:
             self.get_logger().warning(f"{name} classifier needs the boundary network's maps: {fallback}")
 
-    def _declare_self_filter(self) -> None:
-        self.self_filter = declare(
-            self, "self_filter", True, "Mask the robot's own arm, rendered from /joint_states, out of the objects"
-        )
-        base_xyz = declare(self, "robot_base_xyz_m", [-0.55, 0.0, 0.0], "World position of the robot base, metres")
-        base_yaw = declare(
-            self, "robot_base_yaw_rad", 0.0, "Yaw of the robot base about world +z, radians", -3.1416, 3.1416
-        )
-        padding = declare(self, "self_filter_padding_m", 0.03, "Margin around the arm's links, metres", 0.0, 0.5)
-        if len(base_xyz) != 3:
-            raise ValueError("robot_base_xyz_m must have 3 values")
-        self.T_world_base = base_pose([float(v) for v in base_xyz], base_yaw)
-        self.self_filter_params = SelfFilterParams(padding_m=padding)
+    def _start_self_filter(self, config: SegmentationNodeConfig) -> None:
+        self.self_filter = config.self_filter
+        self.T_world_base = base_pose([float(v) for v in config.robot_base_xyz_m], config.robot_base_yaw_rad)
+        self.self_filter_params = SelfFilterParams(padding_m=config.self_filter_padding_m)
         self.joint_q = None
         if self.self_filter:
             self.create_subscription(JointState, "joint_states", self.on_joint_state, 10)

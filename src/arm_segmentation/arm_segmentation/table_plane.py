@@ -11,6 +11,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
+from arm_core.settings import setting
+
 
 @dataclass(frozen=True)
 class TableParams:
@@ -18,12 +20,15 @@ class TableParams:
 
     horizontal_tolerance_deg: float = 12.0
     histogram_bin_m: float = 0.004
-    min_table_area_m2: float = 0.05  # a camera 0.2 m above the table sees about 0.07 m^2 of it past the objects
+    # a camera 0.2 m above the table sees about 0.07 m^2 of it past the objects
+    min_table_area_m2: float = setting(
+        0.05, "Smallest horizontal plane taken as a table, m^2", 0.005, 10.0, parameter=True
+    )
     max_levels: int = 3
     band_m: float = 0.006
     band_per_m2: float = 0.003
     footprint_margin_m: float = 0.03
-    max_object_height_m: float = 0.6
+    max_object_height_m: float = setting(0.6, "Tallest object above its table, m", 0.02, 3.0, parameter=True)
     # an instance with less than this share of its points over a support's footprint stands beside
     # the table, not on it (a wall behind it, furniture past its edge)
     min_share_over_support: float = 0.5

@@ -334,16 +334,3 @@ def test_camera_frames_are_dropped_while_the_planner_serves_a_goal(probe, tmp_pa
         action_client.destroy()
         planner.destroy_node()
     assert code == 0, node.log()
-
-
-@pytest.mark.slow
-def test_weights_that_are_not_a_merge_classifier_end_the_node_with_a_clear_error(tmp_path):
-    if not node_built("segmentation"):
-        pytest.fail(f"segmentation_node is not built ({executable('segmentation')}); run `make setup`")
-    junk = tmp_path / "merge.npz"
-    junk.write_bytes(b"not weights")
-    node = NodeProcess("segmentation", tmp_path / "seg.log", params={"merge_checkpoint": str(junk)})
-    code = node.wait(60.0)
-    if code is None:
-        node.stop()
-    assert code == 2 and "merge_checkpoint" in node.log() and "not merge classifier weights" in node.log(), node.log()

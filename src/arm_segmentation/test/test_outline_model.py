@@ -6,14 +6,12 @@ from arm_segmentation.boundary import BorderParams, outline_band, refine_borders
 from arm_segmentation.outline_model import (
     DEFAULT_CHECKPOINT,
     FEATURE_NAMES,
-    OutlineClassifier,
     OutlineParams,
     outline_features,
     outline_image,
     refine_outline,
     shared_outline_classifier,
 )
-from arm_segmentation.outline_train import belongs
 
 
 def _disc_scene(radius_px=18):
@@ -69,31 +67,3 @@ def test_the_shipped_classifier_moves_an_outline_two_pixels_off_back_to_the_obje
     assert refined.dtype == labels.dtype
     wrong_before = np.count_nonzero((labels > 0) != disc)
     assert np.count_nonzero((refined > 0) != disc) <= 0.25 * wrong_before
-
-
-def test_belongs_is_the_true_object_the_candidate_mostly_covers():
-    truth = np.zeros((30, 40), np.uint16)
-    truth[5:20, 5:15], truth[5:20, 15:30] = 1, 2
-    labels = np.zeros_like(truth)
-    labels[4:21, 4:17] = 1  # object 1 plus a sliver of object 2 and a background rim
-    band = outline_band(labels, 2)
-    result = belongs(labels, truth, band)
-    on = truth[band.rows, band.cols]
-    assert np.all(result == (on == 1))
-    assert not np.any(belongs(labels, np.zeros_like(truth), band))
-
-
-def test_seg_outline_train_makes_shards_trains_and_resumes(tmp_path):
-    from arm_segmentation.outline_train import main
-
-    out = tmp_path / "outline.npz"
-    args = ["--data", str(tmp_path / "data"), "--train-shards", "1", "--test-shards", "1", "--views", "1"]
-    args += ["--steps", "5", "--hidden", "4", "--batch", "64", "--out", str(out)]
-    assert main(args) == 0
-    classifier = OutlineClassifier(out)
-    assert classifier.layers[0][0].shape == (len(FEATURE_NAMES), 4)
-    assert (tmp_path / "outline.md").read_text().startswith("# Outline classifier")
-    shard = tmp_path / "data" / "train" / "shard_000000.npz"
-    stamp = shard.stat().st_mtime_ns
-    assert main(args) == 0
-    assert shard.stat().st_mtime_ns == stamp

@@ -104,4 +104,3 @@ def test_frame_without_pose_segments_with_the_estimated_pose():
     pose = PoseStamped(pose=matrix_to_pose(decoded.T_world_camera))
     frame, _ = segment_frame(decoded, depth_msg, info, pose)
     assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
-

@@ -158,12 +158,3 @@ def test_random_frames_never_crash(seed):
         labels = segment(rgb, depth, K, camera, SegmentationParams(working_stride=stride))
         assert labels.shape == (h, w) and labels.dtype == np.uint16
     assert segment_baseline(rgb, depth, K, camera).shape == (h, w)
-
-
-def test_workspace_box_leaves_out_objects_beyond_it():
-    rgb, depth, gt, K = render(touching_and_stacked(), CAMERA)
-    params = SegmentationParams(workspace_max_m=(0.1, np.inf, np.inf))  # the yellow box stands at x = 0.15
-    labels = segment(rgb, depth, K, CAMERA, params)
-    yellow = gt == 4
-    assert np.count_nonzero(labels[yellow]) < 0.05 * np.count_nonzero(yellow)
-    assert segmentation_metrics(labels, np.where(yellow, 0, gt))["n_pred"] == 3

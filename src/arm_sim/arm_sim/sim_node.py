@@ -17,7 +17,7 @@ from trajectory_msgs.msg import JointTrajectory
 from arm_interfaces.msg import ReconstructedObjectArray
 from arm_ros.common import (
     RateLimitedErrors,
-    declare,
+    declare_settings,
     diagnostics_msg,
     latched_qos,
     run_node,
@@ -26,59 +26,38 @@ from arm_ros.common import (
 from arm_ros.conversions.images import camera_info_from_K, numpy_to_image
 from arm_ros.conversions.meshes import reconstructed_object_msg
 from arm_ros.conversions.poses import matrix_to_pose
-from arm_ros.goal_activity import declare_goal_pause
+from arm_ros.goal_activity import goal_pause
 from arm_sim import robot
-from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.controllers import SimControllers, trajectory_start_s
 from arm_sim.core import SimSession
+from arm_sim.node_config import SimNodeConfig
 
 
 class SimNode(Node):
     def __init__(self):
         super().__init__("sim_node")
-        seed = declare(self, "seed", 0, "Scene seed", 0, 2**31 - 1)
-        objects = declare(self, "objects", "", "Folder of .obj/.stl/.ply meshes (metres); '' = procedural library")
-        split = declare(self, "split", "heldout", "Procedural categories", choices=["train", "heldout"])
-        n_objects = declare(self, "n_objects", 8, "Objects in the scene; 0 = uniform(3, 20)", 0, 40)
-        self.camera_rate_hz = declare(self, "camera_rate_hz", 2.0, "RGB-D publish rate (sim time)", 0.1, 30.0)
-        self.physics_rate_hz = declare(self, "physics_rate_hz", 50.0, "Control/physics tick rate", 10.0, 500.0)
-        eye = declare(self, "camera_eye", [0.7, 0.0, 0.5], "Camera position in the world, metres")
-        target = declare(self, "camera_target", [0.0, 0.0, 0.05], "Point the camera looks at, metres")
-        self.depth_noise = declare(self, "depth_noise", True, "Apply the depth-sensor noise model")
-        visual_domain = declare(
-            self,
-            "visual_domain",
-            DEFAULT_DOMAIN,
-            "realistic: textured objects, furniture, varied light, camera response and sensor artefacts; "
-            "plain: one flat colour per object on a plain table",
-            choices=list(DOMAINS),
-        )
-        width = declare(self, "width", 640, "Image width, pixels", 64, 1920)
-        height = declare(self, "height", 480, "Image height, pixels", 48, 1080)
-        fovy = declare(self, "fovy_deg", 45.0, "Vertical field of view, degrees", 10.0, 120.0)
-        self.world_frame = declare(self, "world_frame_id", "world", "World frame id")
-        self.camera_frame = declare(self, "camera_frame_id", "camera_color_optical_frame", "Optical frame id")
-        reliability = declare(
-            self, "image_reliability", "reliable", "Image QoS reliability", choices=["reliable", "best_effort"]
-        )
-        if len(eye) != 3 or len(target) != 3 or not np.all(np.isfinite(eye + target)):
+        self.config = config = declare_settings(self, SimNodeConfig())
+        eye, target = config.camera_eye, config.camera_target
+        if not np.all(np.isfinite(eye + target)):
             raise ValueError("camera_eye and camera_target must be 3 finite numbers each")
-
+        self.camera_rate_hz, self.physics_rate_hz = config.camera_rate_hz, config.physics_rate_hz
+        self.depth_noise = config.depth_noise
+        self.world_frame, self.camera_frame = config.world_frame_id, config.camera_frame_id
         self.session = SimSession(
-            seed=seed,
-            objects=objects or None,
-            split=split,
-            n_objects=n_objects or None,
+            seed=config.seed,
+            objects=config.objects or None,
+            split=config.split,
+            n_objects=config.n_objects or None,
             camera_eye=eye,
             camera_target=target,
-            width=width,
-            height=height,
-            fovy_deg=fovy,
-            depth_noise=self.depth_noise,
-            visual_domain=visual_domain,
+            width=config.width,
+            height=config.height,
+            fovy_deg=config.fovy_deg,
+            depth_noise=config.depth_noise,
+            visual_domain=config.visual_domain,
         )
         self.errors = RateLimitedErrors(self.get_logger())
-        qos = sensor_qos(reliability)
+        qos = sensor_qos(config.image_reliability)
         self.pub_rgb = self.create_publisher(Image, "camera/color/image_raw", qos)
         self.pub_depth = self.create_publisher(Image, "camera/depth/image_raw", qos)
         self.pub_info = self.create_publisher(CameraInfo, "camera/camera_info", qos)
@@ -93,8 +72,8 @@ class SimNode(Node):
         self.controllers = SimControllers(
             self,
             self.session,
-            declare(self, "arm_controller", "arm_controller", "Arm controller name: <name>/follow_joint_trajectory"),
-            declare(self, "gripper_controller", "gripper_controller", "Gripper controller name: <name>/gripper_cmd"),
+            config.arm_controller,
+            config.gripper_controller,
             lambda: self.session.time_s,
             self.header,
         )
@@ -102,13 +81,13 @@ class SimNode(Node):
         self._render_ms = 0.0
         self.frames_published = 0
         self.trajectories_followed = self.trajectories_rejected = 0
-        # rendering shares the CPU with the planner (a real camera does not); segmentation drops frames then too
-        self.goals = declare_goal_pause(self, "rendering camera frames")
+        self.goals = goal_pause(self, config.goal_pause)
         # the sim is the clock source: it ticks on the steady clock, also when run with use_sim_time:=true
         self.create_timer(1.0 / self.physics_rate_hz, self.on_tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_ground_truth()
         self.get_logger().info(
-            f"sim ready: {len(self.session.scene.objects)} objects (seed {seed}), camera {self.camera_rate_hz} Hz"
+            f"sim ready: {len(self.session.scene.objects)} objects (seed {config.seed}), "
+            f"camera {self.camera_rate_hz} Hz"
         )
 
     def stamp(self) -> Time:

@@ -1,0 +1,1 @@
+"""Data and training of the segmentation's boundary network and learned classifiers."""
