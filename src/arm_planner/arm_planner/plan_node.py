@@ -394,10 +394,8 @@ class PlanNode(Node):
                 f"; no meshes of a frame after the motion within {self.config.observe_timeout_s} s"
             )
             return
-        if task == "grasp":
-            expected = (0.0, 0.0, self.session.config.grasp_lift_goal_m)
-        else:
-            expected = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
+        requested = (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
+        expected = self.session.goal_displacement(task, requested)
         moved = observed_displacement(scene, target_id, newer, expected, self.config.replan_target_radius_m)
         if moved is None:
             result.controller_message += "; the target was not found in the meshes after the motion"

@@ -30,17 +30,12 @@ from arm_planner.mppi import (
     state_layout,
 )
 from arm_planner.robot_spec import ResolvedRobot, RobotSpec
-from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP, TASK_PUSH, TASK_REARRANGE, TASKS
-from arm_planner.tasks.base import RewardWeights, TargetGeometry
-from arm_planner.tasks.grasp import GRASP_STATES, GraspReward
-from arm_planner.tasks.push import PUSH_STATES, CagePushReward, PushReward
+from arm_planner.tasks import TASKS
+from arm_planner.tasks.base import RewardWeights, TargetGeometry, TaskSetup
+from arm_planner.tasks.registry import TASK_REWARDS
 from arm_sim.world import OVERLAP_EXCLUDE_M, SLIDING_FRICTION
 
 DEFAULT_TOLERANCE_M = 0.025
-
-
-class TaskInfeasible(ValueError):
-    """The robot cannot do the task at all (the gripper cannot hold the target), whatever the plan."""
 
 
 @dataclass
@@ -128,12 +123,6 @@ class PlannerConfig:
     object_friction: float = setting(
         SLIDING_FRICTION, "Twin: object-table sliding friction (set the real table's)", 0.05, 2.0, parameter=True
     )
-
-    @property
-    def task_steps(self) -> dict[str, int]:
-        """Step budget per task that has its own (the others: mppi.steps)."""
-        budgets = {"rearrange": self.rearrange_steps, "push": self.push_steps}
-        return {task: steps for task, steps in budgets.items() if steps}
 
     @property
     def uses_hand_geometry(self) -> bool:
@@ -251,79 +240,22 @@ class Planner:
             nq=self.model.nq,
             weights=self.config.weights,
         )
-        displacement = np.asarray(request.goal_displacement_m, dtype=np.float64)
-        if request.task == TASK_GRASP:
-            displacement = np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
-        if request.task in (TASK_GRASP, TASK_REARRANGE):
-            carry = self.config.rearrange_carry_height_m if request.task == TASK_REARRANGE else 0.0
-            search = self.config.grasp_site_search
-            reward = GraspReward(
-                **common,
-                goal_displacement=displacement,
-                close_steps=self.config.close_steps,
-                carry_height_m=carry,
-                finger_gap_open_m=self.robot.spec.finger_gap_open_m if self.config.carry_closing_along else 0.0,
-                fingers=self._open_fingers() if self.config.uses_hand_geometry else None,
-                clear_fingers=self.config.clear_fingers,
-                search_grasp_site=search,
-            )
-            if request.resume_state in PUSH_STATES:  # a rearrange re-planned after it became a push
-                pushed = True
-            elif request.resume_state in GRASP_STATES:
-                pushed = False
-            else:
-                pushed = request.task == TASK_REARRANGE and self.config.push_ungraspable and reward.ungraspable
-            if pushed:  # a rearrange that became a push is a push
-                reward = self._push_reward(common, target_id, displacement, geometry)
-            elif request.task == TASK_GRASP and request.resume_state is None and reward.ungraspable:
-                raise TaskInfeasible(
-                    f"the target is at least {reward.narrowest_width_m * 100:.1f} cm wide along every horizontal "
-                    f"axis, the open fingers hold {reward.fingers.gap_m * 100:.1f} cm, and no site "
-                    "on it fits between them: a parallel gripper cannot pick it up (push or rearrange it instead)"
-                )
-        elif request.task == TASK_PUSH:
-            reward = self._push_reward(common, target_id, displacement, geometry)
-        else:
-            raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
-        if isinstance(reward, PushReward):
-            reward.push_speed_m_s = self.config.push_hand_speed_m_s
-            planned_as = TASK_PUSH
-        else:
-            reward.carry_speed_m_s = self.config.carry_hand_speed_m_s if request.task == TASK_REARRANGE else 0.0
-            reward.lift_to_meet_m = GRASP_LIFT_M if request.task == TASK_GRASP else 0.0
-            planned_as = request.task
-        reward.step_budget = int(self.config.task_steps.get(planned_as) or self.config.mppi.steps)
-        if request.start_com_world is not None:
-            reward.start_com = np.asarray(request.start_com_world, dtype=np.float64)
-            reward.goal = reward.start_com + displacement
-        if request.resume_state:
-            reward.resume(request.resume_state, request.resume_steps_in_state)
-        return reward
-
-    def _push_reward(self, common: dict, target_id: int, displacement: np.ndarray, geometry: TargetGeometry):
-        """The caging push when the target fits between the open fingers, else the one-finger push."""
         joint = int(self.model.body_jntadr[target_id])
         velocity_adr = None
         if joint >= 0 and self.model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE:
             velocity_adr = self.qpos_offset + self.model.nq + int(self.model.jnt_dofadr[joint])
-        spec = self.robot.spec
-        push = dict(
-            common,
-            goal_displacement=displacement,
-            target_vel_adr=velocity_adr,
-            friction=self.config.object_friction,
-        )
-        if self.config.push_cage and CagePushReward.fits_cage(
-            geometry, displacement, spec.finger_gap_open_m, spec.fingertip_to_palm_m
-        ):
-            return CagePushReward(
-                **push,
-                cage_gap_m=spec.finger_gap_open_m,
-                cage_margin_m=self.config.push_cage_margin_m,
-                finger_length_m=spec.fingertip_to_palm_m,
-                tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
-            )
-        return PushReward(**push, contact_height_m=self.config.push_contact_height_m)
+        fingers = self._open_fingers() if self.config.uses_hand_geometry else None
+        setup = TaskSetup(common, self.config, self.robot.spec, fingers, velocity_adr)
+        build = TASK_REWARDS.get(request.task)
+        if build is None:
+            raise ValueError(f"unknown task {request.task!r}; expected one of {TASKS}")
+        reward = build(setup, request)
+        if request.start_com_world is not None:
+            reward.start_com = np.asarray(request.start_com_world, dtype=np.float64)
+            reward.goal = reward.start_com + reward.goal_displacement
+        if request.resume_state:
+            reward.resume(request.resume_state, request.resume_steps_in_state)
+        return reward
 
     def _open_fingers(self) -> OpenFingers:
         spec = self.robot.spec

@@ -21,10 +21,10 @@ from arm_planner.planner import (
     PlanRequest,
     PlanResult,
     Stream,
-    TaskInfeasible,
 )
 from arm_planner.robot_spec import RobotSpec
 from arm_planner.tasks import TASK_GRASP, TASKS
+from arm_planner.tasks.base import TaskInfeasible
 from arm_planner.twin import Twin, TwinError, TwinObject, geometry_signature, panda_robot_spec
 
 # Panda: shoulder (joint 2) 0.333 m above the base; shoulder -> wrist (joint 6) at most ~0.80 m
@@ -106,6 +106,12 @@ class ManipulationSession:
         self.planner = Planner(self.twin.model, self.robot, self.config)
         self.twin_builds += 1
 
+    def goal_displacement(self, task: str, displacement) -> np.ndarray:
+        """Where the task moves the target, m: a grasp lifts it by grasp_lift_goal_m whatever the goal says."""
+        if task == TASK_GRASP:
+            return np.array([0.0, 0.0, self.config.grasp_lift_goal_m])
+        return np.asarray(displacement, dtype=np.float64)
+
     def _reach_problem(self, point: np.ndarray) -> str | None:
         shoulder = np.array([*self.robot_base_xy, self.table_height_m + SHOULDER_HEIGHT_M])
         distance = float(np.linalg.norm(point + np.array([0.0, 0.0, WRIST_ABOVE_TCP_M]) - shoulder))
@@ -165,7 +171,7 @@ class ManipulationSession:
         poses = {o.id: o.T_world_object for o in self.objects}
         geometry = twin.target_geometry(target_id, poses, with_halfspaces=self.config.uses_hand_geometry)
         start = geometry.com_world if start_com_world is None else np.asarray(start_com_world, dtype=np.float64)
-        goal = start + (np.array([0.0, 0.0, self.config.grasp_lift_goal_m]) if task == TASK_GRASP else displacement)
+        goal = start + self.goal_displacement(task, displacement)
         for what, point in (("target", geometry.com_world), ("goal", goal)):
             problem = self._reach_problem(point)
             if problem:

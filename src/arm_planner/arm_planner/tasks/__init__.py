@@ -6,9 +6,12 @@ Parameters": ungrasped -> grasping (gripper closes for `close_steps`) -> grasped
 every task shares (the target's geometry, the weights, kinematics from the state); `grasp` the grasp
 and the rearrange (a grasp carried to a goal); `push` the one-finger and the caging push.
 
-Each task also owns what the planning loop asks of it (TaskReward): its step budget, the hand's speed
-cap at each step, whether it holds its goal (so the loop may stop early) and whether it is met. The
-loop never asks for a task's name; a rearrange of a target no grasp holds is planned as a push.
+Each task builds its own reward from the request and the planner's settings (`registry.TASK_REWARDS`:
+grasp_task, push_task, rearrange_task) and owns what the planning loop asks of it (TaskReward): its
+step budget, the hand's speed cap at each step, whether it holds its goal (so the loop may stop early)
+and whether it is met. The planner never asks for a task's name; a rearrange of a target no grasp
+holds is built as a push. A new task is a module here and an entry in the registry (and a constant in
+the Manipulate action for plan_node).
 """
 
 TASK_GRASP = "grasp"

@@ -99,6 +99,27 @@ def yaw_error(rot: np.ndarray, axis_xy: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(along / norm, 0.0, 1.0))
 
 
+class TaskInfeasible(ValueError):
+    """The robot cannot do the task at all (the gripper cannot hold the target), whatever the plan."""
+
+
+@dataclass
+class TaskSetup:
+    """What a task's reward is built from (tasks.registry): the keyword arguments every reward takes,
+    the planner's settings (PlannerConfig), the robot (RobotSpec), its open fingers (None: not used)
+    and the state index of the target's velocity (None: not a free body)."""
+
+    common: dict
+    config: object
+    robot: object
+    fingers: object = None
+    target_vel_adr: int | None = None
+
+    def step_budget(self, own_steps: int) -> int:
+        """The task's own step budget, or the planner's `steps` when that is 0."""
+        return int(own_steps or self.config.mppi.steps)
+
+
 @dataclass
 class TaskReward:
     """Shared machinery: hand and target kinematics from qpos, state, step counter."""
@@ -113,7 +134,7 @@ class TaskReward:
     weights: RewardWeights = field(default_factory=RewardWeights)
     state: str = "ungrasped"
     step_count: int = 0
-    # MPPI steps the task may take (the planner sets it from PlannerConfig.task_steps).
+    # MPPI steps the task may take (set by the task's builder in tasks.registry).
     step_budget: int = 200
 
     # The planner's loop asks the task, never its name: its step budget, the hand's speed cap now,

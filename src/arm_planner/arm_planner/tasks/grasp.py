@@ -17,14 +17,18 @@ import numpy as np
 
 from arm_planner.finger_clearance import OpenFingers, clear_closing_axis
 from arm_planner.grasp_site import GraspTarget, find_grasp_site, search_grasp_site
+from arm_planner.tasks import GRASP_LIFT_M
 from arm_planner.tasks.base import (
+    TaskInfeasible,
     TaskReward,
+    TaskSetup,
     angle_down,
     narrowest_horizontal_width_m,
     offsets_along,
     tilt_beyond,
     yaw_error,
 )
+from arm_planner.tasks.push import PUSH_STATES, push_reward
 
 GRASP_STATES = ("ungrasped", "grasping", "grasped")
 
@@ -286,3 +290,54 @@ class GraspReward(TaskReward):
     def error(self, state: np.ndarray) -> float:
         _, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(self.goal - target_pos[0]))
+
+
+def _grasp_reward(setup: TaskSetup, displacement: np.ndarray, carry_height_m: float) -> GraspReward:
+    config, spec = setup.config, setup.robot
+    return GraspReward(
+        **setup.common,
+        goal_displacement=displacement,
+        close_steps=config.close_steps,
+        carry_height_m=carry_height_m,
+        finger_gap_open_m=spec.finger_gap_open_m if config.carry_closing_along else 0.0,
+        fingers=setup.fingers,
+        clear_fingers=config.clear_fingers,
+        search_grasp_site=config.grasp_site_search,
+    )
+
+
+def grasp_task(setup: TaskSetup, request) -> GraspReward:
+    """Lift the target towards grasp_lift_goal_m (met at GRASP_LIFT_M); TaskInfeasible when no site on
+    it fits between the open fingers."""
+    config = setup.config
+    reward = _grasp_reward(setup, np.array([0.0, 0.0, config.grasp_lift_goal_m]), 0.0)
+    if request.resume_state is None and reward.ungraspable:
+        raise TaskInfeasible(
+            f"the target is at least {reward.narrowest_width_m * 100:.1f} cm wide along every horizontal "
+            f"axis, the open fingers hold {reward.fingers.gap_m * 100:.1f} cm, and no site "
+            "on it fits between them: a parallel gripper cannot pick it up (push or rearrange it instead)"
+        )
+    reward.carry_speed_m_s = 0.0
+    reward.lift_to_meet_m = GRASP_LIFT_M
+    reward.step_budget = setup.step_budget(0)
+    return reward
+
+
+def rearrange_task(setup: TaskSetup, request):
+    """Pick the target, carry it by the request's goal displacement and set it down; a target no grasp
+    holds (push_ungraspable) is pushed there instead, and is then a push in every respect."""
+    config = setup.config
+    displacement = np.asarray(request.goal_displacement_m, dtype=np.float64)
+    reward = _grasp_reward(setup, displacement, config.rearrange_carry_height_m)
+    if request.resume_state in PUSH_STATES:  # re-planned after it became a push
+        pushed = True
+    elif request.resume_state in GRASP_STATES:
+        pushed = False
+    else:
+        pushed = config.push_ungraspable and reward.ungraspable
+    if pushed:
+        return push_reward(setup, displacement)
+    reward.carry_speed_m_s = config.carry_hand_speed_m_s
+    reward.lift_to_meet_m = 0.0
+    reward.step_budget = setup.step_budget(config.rearrange_steps)
+    return reward

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arm_planner.tasks.base import TargetGeometry, TaskReward, angle_down, offsets_along, yaw_error
+from arm_planner.tasks.base import TargetGeometry, TaskReward, TaskSetup, angle_down, offsets_along, yaw_error
 
 PUSH_STATES = ("approaching", "pushing")
 # Grid (m) the object's footprint is kept on, for the hand's distance to it.
@@ -402,3 +402,35 @@ class CagePushReward(PushReward):
         if self.state == "pushing" and self.out_of_cage(state):
             self.state = "approaching"
         return self.state
+
+
+def push_reward(setup: TaskSetup, displacement: np.ndarray) -> PushReward:
+    """The caging push when the target fits between the open fingers (and push_cage is on), else the
+    one-finger push; its speed cap and step budget from the planner's settings."""
+    config, spec = setup.config, setup.robot
+    push = dict(
+        setup.common,
+        goal_displacement=displacement,
+        target_vel_adr=setup.target_vel_adr,
+        friction=config.object_friction,
+    )
+    if config.push_cage and CagePushReward.fits_cage(
+        setup.common["geometry"], displacement, spec.finger_gap_open_m, spec.fingertip_to_palm_m
+    ):
+        reward = CagePushReward(
+            **push,
+            cage_gap_m=spec.finger_gap_open_m,
+            cage_margin_m=config.push_cage_margin_m,
+            finger_length_m=spec.fingertip_to_palm_m,
+            tcp_above_fingertip_m=spec.tcp_above_fingertip_m,
+        )
+    else:
+        reward = PushReward(**push, contact_height_m=config.push_contact_height_m)
+    reward.push_speed_m_s = config.push_hand_speed_m_s
+    reward.step_budget = setup.step_budget(config.push_steps)
+    return reward
+
+
+def push_task(setup: TaskSetup, request) -> PushReward:
+    """Push the target by the request's goal displacement."""
+    return push_reward(setup, np.asarray(request.goal_displacement_m, dtype=np.float64))
