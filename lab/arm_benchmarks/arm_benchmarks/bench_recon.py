@@ -41,12 +41,13 @@ from tqdm import tqdm
 
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_benchmarks.recon.cache import cached_scene, load_cases
-from arm_benchmarks.recon.config import ALL_METHODS, BenchConfig
+from arm_benchmarks.recon.config import ALL_METHODS, PIPELINE_FIELDS, BenchConfig
 from arm_benchmarks.recon.plots import plot_by_visibility, plot_qualitative, plot_stability
 from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
 from arm_benchmarks.recon.summary import summarise
-from arm_reconstruction.meshing import DEFAULT_SMOOTHING_ITERATIONS
+from arm_core.settings import add_arguments, from_arguments
+from arm_reconstruction.pipeline import ReconstructionSettings
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
 
@@ -126,25 +127,7 @@ def parse_args(argv=None) -> BenchConfig:
     parser.add_argument("--stable-threshold-m", type=float, default=defaults.stable_threshold_m)
     parser.add_argument("--no-noise", action="store_true", help="render perfect depth")
     parser.add_argument("--domain", choices=DOMAINS, default=DEFAULT_DOMAIN, help="visual domain of the scenes")
-    parser.add_argument(
-        "--occupancy-threshold",
-        type=float,
-        default=defaults.threshold,
-        help="occupancy probability of a solid voxel, for every network method",
-    )
-    parser.add_argument(
-        "--smoothing-iterations", type=int, default=DEFAULT_SMOOTHING_ITERATIONS, help="Taubin smoothing of meshes"
-    )
-    parser.add_argument(
-        "--stable-base-tilt-deg",
-        type=float,
-        default=defaults.stable_base_tilt_deg,
-        help="widen the base of objects that would topple at this tilt (0: off)",
-    )
-    parser.add_argument("--no-join", action="store_true", help="leave an object's separate parts apart (no joining)")
-    parser.add_argument(
-        "--no-snap", action="store_true", help="leave the seen surface where marching cubes put it (no snapping)"
-    )
+    pipeline_flags = add_arguments(parser, ReconstructionSettings(), PIPELINE_FIELDS)
     parser.add_argument(
         "--view",
         choices=("occluded", "random"),
@@ -163,8 +146,10 @@ def parse_args(argv=None) -> BenchConfig:
         parser.error("need --scenes >= 1, 1 <= --min-objects <= --max-objects, --min-visible-pixels >= 10")
     if args.chamfer_samples < 1 or args.iou_resolution < 8 or args.settle_s <= 0 or args.stable_threshold_m <= 0:
         parser.error("need --chamfer-samples >= 1, --iou-resolution >= 8, positive --settle-s and threshold")
-    if not 0 < args.occupancy_threshold < 1:
-        parser.error("need 0 < --occupancy-threshold < 1")
+    try:
+        pipeline = from_arguments(ReconstructionSettings(), args, pipeline_flags)
+    except ValueError as error:
+        parser.error(str(error))
     if not 0 < args.physics_timestep_s <= 0.02 or min(args.threads, args.view_candidates) < 1 or args.qualitative < 0:
         parser.error("need 0 < --physics-timestep-s <= 0.02, --threads and --view-candidates >= 1, --qualitative >= 0")
     return BenchConfig(
@@ -185,11 +170,7 @@ def parse_args(argv=None) -> BenchConfig:
         stable_threshold_m=args.stable_threshold_m,
         depth_noise=not args.no_noise,
         domain=args.domain,
-        threshold=args.occupancy_threshold,
-        smoothing_iterations=args.smoothing_iterations,
-        snap_to_depth=not args.no_snap,
-        stable_base_tilt_deg=args.stable_base_tilt_deg,
-        join_parts=not args.no_join,
+        **{name: getattr(pipeline, name) for name in PIPELINE_FIELDS},
         view=args.view,
         view_candidates=args.view_candidates,
         qualitative=args.qualitative,

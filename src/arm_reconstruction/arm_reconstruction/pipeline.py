@@ -129,7 +129,9 @@ class ReconstructionSettings:
     min_component_voxels: int = setting(
         DEFAULT_MIN_COMPONENT_VOXELS, "Drop occupied components smaller than this, voxels", 1, 4096
     )
-    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS
+    smoothing_iterations: int = setting(
+        DEFAULT_SMOOTHING_ITERATIONS, "Taubin smoothing iterations of each mesh", 0, 100
+    )
     stable_base_tilt_deg: float = setting(
         DEFAULT_STABLE_BASE_TILT_DEG, "A base, where unseen, for objects toppling at this tilt, deg (0: off)", 0.0, 45.0
     )
