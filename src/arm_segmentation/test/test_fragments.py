@@ -59,3 +59,19 @@ def test_a_strip_between_two_objects_joins_the_one_it_touches_most():
     labels[100:125, 206:300], depth[100:125, 206:300] = 3, 1.0
     out = absorb_fragments(labels, depth, K, PARAMS)
     assert np.all(out[100:140, 200:206] == out[150, 150]) and len(np.unique(out[out > 0])) == 2
+
+
+def test_a_strip_along_an_edge_joins_its_object_and_a_small_object_beside_a_box_stays():
+    """At 1 m: a 5 x 40 px strip bordering a box along 40 px (about 45 % of its outline: one long
+    side), the table around the rest, joins the box; a 20 x 20 px object touching the box along one
+    side (a quarter of its outline) stays an object."""
+    labels = np.zeros((480, 640), np.uint16)
+    depth = np.full((480, 640), 1.5, np.float32)
+    labels[100:300, 100:200], depth[100:300, 100:200] = 1, 1.0
+    labels[150:190, 200:205], depth[150:190, 200:205] = 2, 1.0
+    labels[250:270, 200:220], depth[250:270, 200:220] = 3, 1.0
+    areas = visible_areas_m2(labels, depth, K)
+    assert areas[2] < PARAMS.min_instance_area_m2 and PARAMS.min_speck_area_m2 < areas[3] < PARAMS.min_instance_area_m2
+    out = absorb_fragments(labels, depth, K, PARAMS)
+    assert np.all(out[150:190, 200:205] == out[100, 100]), "the strip is part of the box"
+    assert out[260, 210] not in (0, out[100, 100]), "the small object beside the box stays itself"
