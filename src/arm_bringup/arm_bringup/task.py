@@ -1,7 +1,8 @@
-"""The demo's manipulation request: one Manipulate goal for the most visible reachable reconstructed
-object (for a grasp, one the open gripper can span; a rearrange prefers one), judged in the simulator
-by how the true object moved. Where no object suits the task, no goal is sent and the reason is
-reported."""
+"""The demo's manipulation request. Candidates are the reachable reconstructed objects, most visible
+first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS of them
+are planned without executing (plan_only goals); the first whose plan meets the task in the planner's
+twin is the target, and one Manipulate goal for it is executed and judged in the simulator by how the
+true object moved. Where no object suits the task, no goal is sent and the reason is reported."""
 
 import time
 
@@ -20,66 +21,102 @@ from arm_sim.world import ROBOT_BASE_XY
 # Reach of the arm from its shoulder, metres; side room a grasp leaves between object and fingers, metres.
 REACH_M = 0.7
 GRASP_SIDE_ROOM_M = 0.005
+# Candidates, most visible first, planned without executing before one is chosen.
+DRY_RUNS = 3
 
 
-def choose_target(objects, task: str):
-    """(target or None, why): the most visible object within REACH_M of the shoulder. A grasp needs
+def rank_targets(objects, task: str):
+    """(candidates, why): the objects within REACH_M of the shoulder, most visible first. A grasp needs
     one whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on each side, fits between the open
-    fingers; a rearrange prefers one (a wider one is pushed). None, with the reason, when no object
-    suits the task."""
+    fingers; a rearrange prefers one (a wider one is pushed). No candidates, with the reason, when no
+    object suits the task."""
     shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
     distance = {o.id: float(np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder)) for o in objects}
     candidates = [o for o in objects if distance[o.id] < REACH_M]
     if not candidates:
         nearest = min(distance.values(), default=float("nan"))
-        return None, f"no reconstructed object within reach ({REACH_M} m from the shoulder; nearest {nearest:.2f} m)"
-    why = f"the most visible of {len(candidates)} object(s) within reach"
+        return [], f"no reconstructed object within reach ({REACH_M} m from the shoulder; nearest {nearest:.2f} m)"
+    why = f"{len(candidates)} object(s) within reach"
     if task in ("grasp", "rearrange"):
         gap = FINGER_GAP_OPEN_M - 2 * GRASP_SIDE_ROOM_M
         fitting = [o for o in candidates if narrowest_horizontal_width_m(msg_to_mesh(o.mesh)[0]) <= gap]
         if fitting:
-            candidates, why = fitting, why + f" that fit(s) between the open fingers ({gap * 100:.1f} cm)"
+            candidates, why = fitting, why + f", {len(fitting)} fitting between the open fingers ({gap * 100:.1f} cm)"
         elif task == "grasp":
-            return None, f"none of the {len(candidates)} object(s) within reach fits between the open fingers"
+            return [], f"none of the {len(candidates)} object(s) within reach fits between the open fingers"
         else:
             why += "; none fits between the open fingers, so it is pushed"
-    target = max(candidates, key=lambda o: o.visible_fraction)
-    return target, f"object {target.id}: {why} (visible {target.visible_fraction:.0%})"
+    return sorted(candidates, key=lambda o: -o.visible_fraction), why
 
 
-def run_task(node, observer, meshes, truth, task: str) -> dict:
-    """Send one manipulation request for choose_target's object; judge it in the sim."""
-    client = ActionClient(node, Manipulate, "arm/manipulate")
-    if not client.wait_for_server(timeout_sec=60.0):
-        return {"error": "plan_node action server not available"}
-    target, why = choose_target(meshes.objects, task)
-    print(f"[demo] {task} target: {why}", flush=True)
-    if target is None:
-        return {"task": task, "target_id": None, "why": why, "success_in_sim": None}
+def task_goal(task: str, target, meshes, plan_only: bool = False):
     goal = Manipulate.Goal(
-        task={"grasp": 0, "push": 1, "rearrange": 2}[task], target_id=target.id, meshes_stamp=meshes.header.stamp
+        task={"grasp": 0, "push": 1, "rearrange": 2}[task],
+        target_id=target.id,
+        meshes_stamp=meshes.header.stamp,
+        plan_only=plan_only,
     )
     if task == "push":
         goal.goal_displacement.x, goal.goal_displacement.y = 0.05, -0.30
     elif task == "rearrange":
         goal.goal_displacement.x, goal.goal_displacement.y = 0.20, 0.20
-    T_target = pose_to_matrix(target.pose)
-    _, gt = objects_to_scene(truth)
-    gt_id, _ = min(gt, key=lambda g: np.linalg.norm(g[1].centroid - T_target[:3, 3]))
-    start = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
+    return goal
+
+
+def send_and_wait(node, client, goal, timeout_s: float = 400.0):
+    """The goal's result, or None when it was rejected or timed out."""
     t0 = time.monotonic()
     future = client.send_goal_async(goal)
     while not future.done():
         rclpy.spin_once(node, timeout_sec=0.05)
     handle = future.result()
     if not handle.accepted:
-        return {"error": "goal rejected"}
+        return None
     result_future = handle.get_result_async()
-    while not result_future.done() and time.monotonic() - t0 < 400:
+    while not result_future.done() and time.monotonic() - t0 < timeout_s:
         rclpy.spin_once(node, timeout_sec=0.05)
-    if not result_future.done():
-        return {"error": "planning timed out"}
-    result = result_future.result().result
+    return result_future.result().result if result_future.done() else None
+
+
+def choose_by_dry_runs(node, client, meshes, task: str, candidates: list):
+    """(target, why, dry runs): the first of up to DRY_RUNS candidates whose plan-only request met the
+    task in the planner's twin; the most visible candidate when none did."""
+    runs = []
+    for candidate in candidates[:DRY_RUNS]:
+        result = send_and_wait(node, client, task_goal(task, candidate, meshes, plan_only=True))
+        met = bool(result is not None and result.success)
+        runs.append({"id": int(candidate.id), "met_in_twin": met, "message": result.message if result else "no result"})
+        if met:
+            tried = f"{len(runs)} of {min(len(candidates), DRY_RUNS)} tried"
+            seen = f"visible {candidate.visible_fraction:.0%}"
+            return candidate, f"object {candidate.id} ({seen}): its dry run met the task in the twin ({tried})", runs
+    target = candidates[0]
+    why = f"object {target.id}, the most visible: no dry run of the {len(runs)} tried met the task in the twin"
+    return target, why, runs
+
+
+def run_task(node, observer, meshes, truth, task: str) -> dict:
+    """Choose a target by dry runs in the planner's twin, send the manipulation request and judge it in
+    the sim by how the true object moved."""
+    client = ActionClient(node, Manipulate, "arm/manipulate")
+    if not client.wait_for_server(timeout_sec=60.0):
+        return {"error": "plan_node action server not available"}
+    candidates, why = rank_targets(meshes.objects, task)
+    if not candidates:
+        print(f"[demo] {task}: no target: {why}", flush=True)
+        return {"task": task, "target_id": None, "why": why, "success_in_sim": None}
+    target, chosen, dry_runs = choose_by_dry_runs(node, client, meshes, task, candidates)
+    why = f"{why}; {chosen}"
+    print(f"[demo] {task} target: {why}", flush=True)
+    goal = task_goal(task, target, meshes)
+    T_target = pose_to_matrix(target.pose)
+    _, gt = objects_to_scene(truth)
+    gt_id, _ = min(gt, key=lambda g: np.linalg.norm(g[1].centroid - T_target[:3, 3]))
+    start = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
+    t0 = time.monotonic()
+    result = send_and_wait(node, client, goal)
+    if result is None:
+        return {"error": "goal rejected or planning timed out"}
     plan_s = time.monotonic() - t0  # planning and, with ros2_control, the execution
     duration = 0.0
     if result.trajectory.points:
@@ -101,6 +138,7 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
         "task": task,
         "target_id": int(target.id),
         "why": why,
+        "dry_runs": dry_runs,
         "truth_id": int(gt_id),
         "planned_success": bool(result.success),
         "message": result.message,

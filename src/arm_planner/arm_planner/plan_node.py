@@ -319,7 +319,7 @@ class PlanNode(Node):
             return Outcome(False, problem), JointTrajectory()
         target_id = int(goal.target_id)
         self._goal_start = (scene, target_id)
-        mode = self.config.execution
+        mode = "plan_only" if goal.plan_only else self.config.execution
         if mode == "stream":
             stream = TrajectoryStream(
                 self.session.config.mppi.control_dt_s, self.config.stream_lead_s, self.config.stream_period_s

@@ -196,6 +196,20 @@ def test_execute_mode_holds_back_a_plan_the_twin_did_not_meet(graph):
     assert len(received) == before
 
 
+def test_a_plan_only_goal_returns_the_plan_and_sends_nothing(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    assert node.config.execution == "stream"
+    before = len(received)
+    goal = Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=4, plan_only=True)
+    result = _wait(_wait(action.send_goal_async(goal)).get_result_async()).result
+    assert len(result.trajectory.points) == 5, result.message
+    assert result.controller_error_code == Manipulate.Result.EXECUTION_NOT_SENT
+    time.sleep(0.5)
+    assert len(received) == before
+
+
 def test_goal_plans_on_the_meshes_its_stamp_names(graph):
     node, client, action, _ = graph
     for object_id, stamp_s in ((4, 100), (7, 101)):  # the same box, relabelled in a later frame

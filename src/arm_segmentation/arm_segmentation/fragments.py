@@ -6,9 +6,9 @@ An instance whose visible area is under min_instance_area_m2 and whose outline r
 min_contact_share along larger instances at its depth is part of one and joins the one it touches
 most (a strip left between two objects where one occludes the other joins the one behind): a small
 object beside another touches it along one side, under a third of its outline (no small true object
-on bench_seg's simulated frames reached 0.3; the strips on the OSD frames ran 0.3-0.6). A speck under min_speck_area_m2 (too
-small to reconstruct or grasp: a corner of a face cut off by an edge) joins the larger instance it
-touches most at its depth, and is dropped when it touches none.
+on bench_seg's simulated frames reached 0.3; the strips on the OSD frames ran 0.3-0.6). A speck
+under min_speck_area_m2 (too small to reconstruct or grasp: a corner of a face cut off by an edge)
+joins the larger instance it touches most at its depth, and is dropped when it touches none.
 Instances seen mostly without depth have no measured size and are left alone.
 """
 
