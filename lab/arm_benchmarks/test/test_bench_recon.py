@@ -4,8 +4,6 @@ import numpy as np
 import pytest
 import torch
 import trimesh
-from arm_training.reconstruction.box_dataset import tiny_train_config, write_box_dataset
-from arm_training.reconstruction.train import train
 
 from arm_benchmarks.bench_recon import parse_args, run
 from arm_benchmarks.recon.config import BenchConfig
@@ -16,6 +14,8 @@ from arm_benchmarks.recon.report import write_report
 from arm_benchmarks.recon.scoring import load_reconstructors
 from arm_benchmarks.recon.summary import priors_earn_their_place, summarise, visibility_bin
 from arm_planner.twin import TwinObject
+from arm_training.reconstruction.box_dataset import tiny_train_config, write_box_dataset
+from arm_training.reconstruction.train import train
 
 torch.set_num_threads(2)
 

@@ -4,6 +4,9 @@ import math
 import numpy as np
 import pytest
 import torch
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
 from arm_training.reconstruction.losses.connectivity_prior import (
     V_MIN,
     cheapest_path_costs,
@@ -12,8 +15,6 @@ from arm_training.reconstruction.losses.connectivity_prior import (
     connectivity_loss,
     connectivity_value_and_gradient,
 )
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 D = 32
 

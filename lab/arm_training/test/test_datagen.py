@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
-from arm_training.reconstruction import datagen
-from arm_training.reconstruction.dataset import VoxelDataset, unpack_bits, verify_manifest
 from scipy import ndimage
 
 from arm_sim.objects import HELDOUT_CATEGORIES
+from arm_training.reconstruction import datagen
+from arm_training.reconstruction.dataset import VoxelDataset, unpack_bits, verify_manifest
 
 SETTINGS = dict(resolution=16, views_per_scene=2, objects_per_scene=(3, 4))
 

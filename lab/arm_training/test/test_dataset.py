@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 import torch
+
 from arm_training.reconstruction.box_dataset import box_samples, write_box_dataset
 from arm_training.reconstruction.datagen import pack_bits
 from arm_training.reconstruction.dataset import (

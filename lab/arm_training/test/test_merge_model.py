@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-from arm_training.segmentation.merge_train import OracleMerge, save
 
 from arm_segmentation.clustering import ClusterParams, merge_fragments
 from arm_segmentation.merge_model import (
@@ -10,6 +9,7 @@ from arm_segmentation.merge_model import (
     pixel_statistics,
     region_pair_features,
 )
+from arm_training.segmentation.merge_train import OracleMerge, save
 
 
 def _three_fragments():

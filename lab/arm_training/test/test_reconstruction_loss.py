@@ -1,5 +1,6 @@
 import torch
 import torch.nn.functional as F
+
 from arm_training.reconstruction.losses import reconstruction_loss, surface_shell
 
 

@@ -3,14 +3,14 @@ to end on a few simulated views."""
 
 import numpy as np
 import torch
-from arm_training.segmentation.boundary_data import make_shard
-from arm_training.segmentation.boundary_train import NORMAL_X_CHANNEL, crop_batch, frame_arrays
-from arm_training.segmentation.boundary_train import main as train_main
-from arm_training.segmentation.outline_train import belongs
 
 from arm_segmentation.boundary import outline_band
 from arm_segmentation.boundary_net import FEATURE_CHANNELS, BoundaryPredictor, boundary_features
 from arm_segmentation.outline_model import FEATURE_NAMES, OutlineClassifier
+from arm_training.segmentation.boundary_data import make_shard
+from arm_training.segmentation.boundary_train import NORMAL_X_CHANNEL, crop_batch, frame_arrays
+from arm_training.segmentation.boundary_train import main as train_main
+from arm_training.segmentation.outline_train import belongs
 
 
 def test_datagen_and_training_write_weights_the_segmentation_loads(tmp_path):

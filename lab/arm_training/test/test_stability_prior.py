@@ -3,12 +3,13 @@ import math
 import numpy as np
 import pytest
 import torch
+from scipy.special import ndtr
+
 from arm_training.reconstruction.losses.stability_prior import (
     stability_log_probability,
     stability_loss,
     stability_value_and_gradient,
 )
-from scipy.special import ndtr
 
 D = 24
 

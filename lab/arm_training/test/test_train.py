@@ -1,15 +1,15 @@
 import numpy as np
 import pytest
 import torch
+
+from arm_reconstruction.checkpoint import load_checkpoint, read_checkpoint
+from arm_reconstruction.model_cards import write_model_card
 from arm_training.reconstruction.box_dataset import tiny_train_config, write_box_dataset
 from arm_training.reconstruction.dataset import VoxelDataset
 from arm_training.reconstruction.train import main
 from arm_training.reconstruction.training.config import PRIORS, TrainConfig, losses_for_batch
 from arm_training.reconstruction.training.evaluation import voxel_metrics
 from arm_training.reconstruction.training.loop import train
-
-from arm_reconstruction.checkpoint import load_checkpoint, read_checkpoint
-from arm_reconstruction.model_cards import write_model_card
 
 
 @pytest.fixture(scope="module")

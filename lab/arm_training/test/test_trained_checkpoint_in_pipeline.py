@@ -2,26 +2,17 @@
 
 import numpy as np
 import pytest
-from arm_training.reconstruction.box_dataset import tiny_train_config, write_box_dataset
-from arm_training.reconstruction.train import train
 
-from arm_core.camera import look_at
+from arm_benchmarks.robustness.frames import render_frames
 from arm_reconstruction.checkpoint import load_checkpoint
 from arm_reconstruction.pipeline import ReconstructionSettings, Reconstructor
-from arm_sim.objects import object_pool
-from arm_sim.scenes import cluttered_scene
-from arm_sim.world import SimWorld
+from arm_training.reconstruction.box_dataset import tiny_train_config, write_box_dataset
+from arm_training.reconstruction.train import train
 
 
 @pytest.fixture(scope="module")
 def sim():
-    rng = np.random.default_rng(5)
-    scene = cluttered_scene(object_pool(split="train", seed=0), rng, n_objects=6)
-    world = SimWorld(scene, robot_arm=False, width=320, height=240)
-    centre = np.mean([o.T_world_object[:3, 3] for o in scene.objects], axis=0)
-    frame = world.render(look_at(centre + (0.55, 0.2, 0.45), centre), rng=rng)
-    world.close()
-    return scene, frame
+    return None, render_frames(6, 320, 240, seed=5)[0]
 
 
 def args(frame):
