@@ -2,9 +2,9 @@
 
 N seeded scenes (3-20 held-out objects each, settled by physics, camera pose sampled as in the
 paper's benchmark, depth noise on) are rendered at 640x480 and segmented by the default method
-(geometry, colour and the learned merge classifier), by the same method with the learned outline cue
-(boundary_net), by it with the hand-made colour and smooth-surface merging instead of the classifier,
-and by the classic baseline (RANSAC plane + DBSCAN). All are scored with the
+(geometry, colour and the learned merge classifier), by it with the hand-made colour and
+smooth-surface merging instead of the classifier, without the learned outline pass, and by the classic
+baseline (RANSAC plane + DBSCAN). All are scored with the
 UOIS metrics (overlap and boundary P/R/F, F@75%) on all scenes and on the dense subset (>= 12
 objects), and timed per frame.
 

@@ -1,8 +1,8 @@
 """The demo's manipulation request. Candidates are the reachable reconstructed objects, most visible
 first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS of them
 are planned without executing (plan_only goals); the first whose plan meets the task in the planner's
-twin is the target, and one Manipulate goal for it is executed and judged in the simulator by how the
-true object moved. Where no object suits the task, no goal is sent and the reason is reported."""
+twin is the target, and the same goal without plan_only executes that very plan (plan_node keeps it),
+judged in the simulator by how the true object moved. Where no object suits the task, no goal is sent and the reason is reported."""
 
 import time
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import rclpy
@@ -48,6 +49,32 @@ from arm_ros.conversions import ConversionError
 from arm_ros.conversions.stamps import time_ns
 from arm_ros.executors import QueueAwareMultiThreadedExecutor
 
+DRY_RUN_VALID_S = 60.0  # a dry run's plan may be executed this long after it was made
+DRY_RUN_JOINT_TOLERANCE_RAD = 0.01  # ... with every arm joint still this near where it started
+DRY_RUN_GRIPPER_TOLERANCE_M = 0.002
+
+
+@dataclass
+class DryRun:
+    """A plan_only goal's request, the robot state it was planned from and its outcome."""
+
+    request: tuple
+    arm_q: np.ndarray
+    opening_m: float
+    outcome: Outcome
+    made_s: float  # time.monotonic()
+
+    def repeated_by(self, request: tuple, joints) -> bool:
+        """Whether a goal for `request` with the robot at `joints` ((arm_q, opening, stamp) or None) may
+        execute this plan: the same request, soon enough, the robot where it was."""
+        if request != self.request or joints is None or time.monotonic() - self.made_s > DRY_RUN_VALID_S:
+            return False
+        arm_q, opening_m = joints[0], joints[1]
+        return bool(
+            np.max(np.abs(np.asarray(arm_q) - self.arm_q)) <= DRY_RUN_JOINT_TOLERANCE_RAD
+            and abs(float(opening_m) - self.opening_m) <= DRY_RUN_GRIPPER_TOLERANCE_M
+        )
+
 
 class PlanNode(Node):
     def __init__(self, **node_options):
@@ -72,6 +99,7 @@ class PlanNode(Node):
         self._joints = None  # (arm_q, opening, node-clock ns at receipt) from the latest valid /joint_states
         self._joint_error = ""
         self._busy = False
+        self._dry_run: DryRun | None = None  # the last plan_only goal's plan, if it met the task
         self.goals = self.refusals = self.meshes_received = self.meshes_rejected = 0
         self.plan_figures = {}  # timing of the last plan, for /diagnostics
 
@@ -173,6 +201,12 @@ class PlanNode(Node):
             )
             return scene, target_id
         return latest, followed
+
+    @staticmethod
+    def _displacement(goal) -> tuple[float, float, float]:
+        return tuple(
+            round(float(v), 6) for v in (goal.goal_displacement.x, goal.goal_displacement.y, goal.goal_displacement.z)
+        )
 
     def _send(self, joint_names, times_s, positions, stamp) -> None:
         """Execute a trajectory whose times count from `stamp` (the node's clock)."""
@@ -320,6 +354,12 @@ class PlanNode(Node):
         target_id = int(goal.target_id)
         self._goal_start = (scene, target_id)
         mode = "plan_only" if goal.plan_only else self.config.execution
+        request = (task, target_id, scene.stamp_ns, *self._displacement(goal), round(float(goal.tolerance_m), 6))
+        dry_run, self._dry_run = self._dry_run, None
+        if mode != "plan_only" and dry_run is not None and dry_run.repeated_by(request, self._robot_state()[0]):
+            outcome = dry_run.outcome
+            outcome.message += "; executing the plan of the dry run"
+            return outcome, self._publish(outcome, send=True)
         if mode == "stream":
             stream = TrajectoryStream(
                 self.session.config.mppi.control_dt_s, self.config.stream_lead_s, self.config.stream_period_s
@@ -333,6 +373,9 @@ class PlanNode(Node):
         if not outcome.planned:
             return outcome, JointTrajectory()
         if mode == "plan_only":
+            joints = self._robot_state()[0]
+            if outcome.success and joints is not None:
+                self._dry_run = DryRun(request, joints[0], joints[1], outcome, time.monotonic())
             return outcome, self._publish(outcome, send=False)
         if mode == "execute":
             if not outcome.success:

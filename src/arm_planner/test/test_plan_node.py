@@ -210,6 +210,36 @@ def test_a_plan_only_goal_returns_the_plan_and_sends_nothing(graph):
     assert len(received) == before
 
 
+def test_a_goal_repeating_a_dry_run_the_twin_met_executes_that_plan(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    request = node.session.request
+
+    def met_in_the_twin(*args, **kwargs):  # 5 steps never meet a grasp: take this one as met
+        outcome = request(*args, **kwargs)
+        outcome.success = True
+        return outcome
+
+    node.session.request = met_in_the_twin
+    try:
+        dry = Manipulate.Goal(task=Manipulate.Goal.TASK_GRASP, target_id=4, plan_only=True)
+        planned = _wait(_wait(action.send_goal_async(dry)).get_result_async()).result
+    finally:
+        node.session.request = request
+    before = len(received)
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    assert "executing the plan of the dry run" in result.message
+    deadline = time.monotonic() + 5
+    while len(received) == before:
+        assert time.monotonic() < deadline, "the dry run's plan was not sent"
+        time.sleep(0.05)
+    sent = np.array([p.positions for p in received[-1].points])
+    assert np.array_equal(sent, np.array([p.positions for p in planned.trajectory.points]))
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4)
+    assert "dry run" not in result.message, "a dry run's plan is executed once"
+
+
 def test_goal_plans_on_the_meshes_its_stamp_names(graph):
     node, client, action, _ = graph
     for object_id, stamp_s in ((4, 100), (7, 101)):  # the same box, relabelled in a later frame
