@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_planner.ensemble import scale_object_physics
 from arm_sim import robot
 from arm_sim.world import SimWorld
 
@@ -72,7 +71,12 @@ def perturbed_world(scene, sample: PerturbedDraw) -> SimWorld:
     """The scene's world with the draw applied (robot at home plus its joint offsets, objects settled)."""
     poses = moved_poses([o.T_world_object for o in scene.objects], sample.shifts_m, sample.turns_rad)
     world = SimWorld(scene.with_poses(poses), robot_arm=True)
-    scale_object_physics(world.model, world.object_ids, sample.friction_scales, sample.mass_scales)
+    model = world.model
+    for k, body in enumerate(world.object_ids):
+        geoms = np.flatnonzero(model.geom_bodyid == body)
+        model.geom_friction[geoms, 0] *= sample.friction_scales[k]
+        model.body_mass[body] *= sample.mass_scales[k]
+        model.body_inertia[body] *= sample.mass_scales[k]
     world.set_robot_state(robot.HOME_Q + sample.joint_offsets_rad, robot.GRIPPER_OPEN_M)
     world.settle(SETTLE_S)
     return world

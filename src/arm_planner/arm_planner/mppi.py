@@ -20,7 +20,6 @@ import mujoco.rollout
 import numpy as np
 
 from arm_core.settings import setting
-from arm_planner.ensemble import follow_nominal
 
 STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
@@ -115,10 +114,8 @@ class BatchedRollout:
     run to run with 2 threads; the rollout sets the physics state, not the rest of the data.)
     """
 
-    def __init__(self, model: mujoco.MjModel, control_dt_s: float, nthread: int = 2, twins=None):
+    def __init__(self, model: mujoco.MjModel, control_dt_s: float, nthread: int = 2):
         self.model = model
-        # path p runs in twins[p % len(twins)] (ensemble.perturbed_twins; twins[0] is `model`)
-        self.twins = list(twins) if twins else [model]
         substeps = control_dt_s / model.opt.timestep
         if abs(substeps - round(substeps)) > 1e-6 or round(substeps) < 1:
             raise ValueError(f"control step {control_dt_s} s is not a multiple of timestep {model.opt.timestep}")
@@ -131,6 +128,7 @@ class BatchedRollout:
         self._models: dict[int, list[mujoco.MjModel]] = {}
         self._workers = ThreadPoolExecutor(len(self._datas)) if len(self._datas) > 1 else None
         self._path_runners = [mujoco.rollout.Rollout(nthread=0) for _ in self._datas]
+        self._one_model = [model]
         for data in self._datas:
             mujoco.mj_resetData(model, data)
 
@@ -153,14 +151,12 @@ class BatchedRollout:
             out = np.empty((n, nstep, self.nstate))
             self._buffers[(n, nstep)] = out
         init = np.ascontiguousarray(np.broadcast_to(initial_state, (n, self.nstate)), dtype=np.float64)
-        if len(self.twins) > 1:
-            follow_nominal(self.model, self.twins)
         if self.model.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP):
             self._rollout_paths_apart(init, ctrl, nstep, out)
             return out[:, self.substeps - 1 :: self.substeps]
         models = self._models.get(n)
         if models is None:
-            models = self._models[n] = [self.twins[p % len(self.twins)] for p in range(n)]
+            models = self._models[n] = [self.model] * n
         self._runner.rollout(
             models,
             self._datas,
@@ -179,10 +175,9 @@ class BatchedRollout:
         def run(worker: int) -> None:
             data, runner = self._datas[worker], self._path_runners[worker]
             for p in range(worker, len(init), len(self._datas)):
-                twin = self.twins[p % len(self.twins)]
-                mujoco.mj_resetData(twin, data)
+                mujoco.mj_resetData(self.model, data)
                 runner.rollout(
-                    [twin],
+                    self._one_model,
                     [data],
                     init[p : p + 1],
                     ctrl[p : p + 1],
@@ -278,11 +273,11 @@ class Mppi:
     is kept instead of being re-discovered by the noise every step.
     """
 
-    def __init__(self, model: mujoco.MjModel, config: MppiConfig, limits: ControlLimits, twins=None):
+    def __init__(self, model: mujoco.MjModel, config: MppiConfig, limits: ControlLimits):
         self.model = model
         self.config = config
         self.limits = limits
-        self.rollout = BatchedRollout(model, config.control_dt_s, config.nthread, twins)
+        self.rollout = BatchedRollout(model, config.control_dt_s, config.nthread)
         self.rng = np.random.default_rng(config.seed)
         self.nominal = np.zeros((config.horizon, model.nu))
 

@@ -15,7 +15,6 @@ import mujoco
 import numpy as np
 
 from arm_core.settings import setting
-from arm_planner.ensemble import perturbed_twins
 from arm_planner.finger_clearance import OpenFingers
 from arm_planner.kinematics import BodyKinematics
 from arm_planner.mppi import (
@@ -121,9 +120,6 @@ class PlannerConfig:
     push_cage_margin_m: float = setting(
         -0.002, "Push: the cage's clearance each side, m (negative: the fingers close onto the object)", -0.01, 0.02
     )
-    # Robust by construction: the sampled paths spread over twins with perturbed object friction and
-    # masses (ensemble.perturbed_twins), the nominal one included; at the same path count.
-    ensemble_twins: int = setting(1, "Twins the sampled paths are spread over (1: the nominal twin only)", 1, 32)
     object_friction: float = setting(
         SLIDING_FRICTION, "Twin: object-table sliding friction (set the real table's)", 0.05, 2.0, parameter=True
     )
@@ -180,15 +176,12 @@ class Planner:
         self.model = model
         self.robot: ResolvedRobot = robot.resolve(model)
         self.limits = ControlLimits.from_model(model, self.robot.max_rate)
-        free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-        twins = None
-        if self.config.ensemble_twins > 1:
-            twins = perturbed_twins(model, model.jnt_bodyid[free], self.config.ensemble_twins, cfg.seed)
-        self.mppi = Mppi(model, cfg, self.limits, twins)
+        self.mppi = Mppi(model, cfg, self.limits)
         self.qpos_offset, _ = state_layout(model)
         self.hand = BodyKinematics(model, self.robot.tcp_body, np.asarray(robot.tcp_offset_m))
         self._data = mujoco.MjData(model)
         self._object_trees = free_body_trees(model)
+        free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         self._object_qpos = np.array([model.jnt_qposadr[j] + k for j in free for k in range(7)], dtype=int)
         self._object_dofs = np.array([model.jnt_dofadr[j] + k for j in free for k in range(6)], dtype=int)
         self._object_qpos_trees = np.repeat(model.body_treeid[model.jnt_bodyid[free]], 7) if free else np.zeros(0, int)
