@@ -2,7 +2,8 @@
 first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS of them
 are planned without executing (plan_only goals); the first whose plan meets the task in the planner's
 twin is the target, and the same goal without plan_only executes that very plan (plan_node keeps it),
-judged in the simulator by how the true object moved. Where no object suits the task, no goal is sent and the reason is reported."""
+judged in the simulator by how the true object moved. Where no object suits the task, no goal is sent
+and the reason is reported."""
 
 import time
 
@@ -12,30 +13,29 @@ from rclpy.action import ActionClient
 
 from arm_bringup.scenes import objects_to_scene
 from arm_interfaces.action import Manipulate
+from arm_planner.session import reach_problem
 from arm_planner.tasks.base import narrowest_horizontal_width_m
 from arm_ros.conversions.meshes import msg_to_mesh
 from arm_ros.conversions.poses import pose_to_matrix
 from arm_sim.robot import FINGER_GAP_OPEN_M
 from arm_sim.world import ROBOT_BASE_XY
 
-# Reach of the arm from its shoulder, metres; side room a grasp leaves between object and fingers, metres.
-REACH_M = 0.7
+# Side room a grasp leaves between the object and each finger, metres.
 GRASP_SIDE_ROOM_M = 0.005
 # Candidates, most visible first, planned without executing before one is chosen.
 DRY_RUNS = 3
 
 
-def rank_targets(objects, task: str):
-    """(candidates, why): the objects within REACH_M of the shoulder, most visible first. A grasp needs
-    one whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on each side, fits between the open
-    fingers; a rearrange prefers one (a wider one is pushed). No candidates, with the reason, when no
-    object suits the task."""
-    shoulder = np.array([ROBOT_BASE_XY[0], ROBOT_BASE_XY[1], 0.333])
-    distance = {o.id: float(np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - shoulder)) for o in objects}
-    candidates = [o for o in objects if distance[o.id] < REACH_M]
+def rank_targets(objects, task: str, table_height_m: float = 0.0):
+    """(candidates, why): the objects the planner's reach allows (arm_planner.session.reach_problem),
+    most visible first. A grasp needs one whose narrowest horizontal width, with GRASP_SIDE_ROOM_M on
+    each side, fits between the open fingers; a rearrange prefers one (a wider one is pushed). No
+    candidates, with the reason, when no object suits the task."""
+    problems = {o.id: reach_problem(pose_to_matrix(o.pose)[:3, 3], ROBOT_BASE_XY, table_height_m) for o in objects}
+    candidates = [o for o in objects if problems[o.id] is None]
     if not candidates:
-        nearest = min(distance.values(), default=float("nan"))
-        return [], f"no reconstructed object within reach ({REACH_M} m from the shoulder; nearest {nearest:.2f} m)"
+        nearest = next(iter(sorted(problems.values(), key=str)), "no objects")
+        return [], f"no reconstructed object within the arm's reach ({len(objects)} seen; e.g. {nearest})"
     why = f"{len(candidates)} object(s) within reach"
     if task in ("grasp", "rearrange"):
         gap = FINGER_GAP_OPEN_M - 2 * GRASP_SIDE_ROOM_M
@@ -101,7 +101,7 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     client = ActionClient(node, Manipulate, "arm/manipulate")
     if not client.wait_for_server(timeout_sec=60.0):
         return {"error": "plan_node action server not available"}
-    candidates, why = rank_targets(meshes.objects, task)
+    candidates, why = rank_targets(meshes.objects, task, meshes.table_height_m)
     if not candidates:
         print(f"[demo] {task}: no target: {why}", flush=True)
         return {"task": task, "target_id": None, "why": why, "success_in_sim": None}

@@ -35,4 +35,4 @@ def test_no_target_suits_the_task_and_the_reason_says_why():
     candidates, why = rank_targets([wide, far], "grasp")
     assert not candidates and "fits between the open fingers" in why
     candidates, why = rank_targets([far], "push")
-    assert not candidates and "within reach" in why and "1.5" in why
+    assert not candidates and "reach" in why and "1.50 m from the shoulder" in why

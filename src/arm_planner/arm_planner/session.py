@@ -54,6 +54,21 @@ class Outcome:
         return self.result.joint_names if self.result else ()
 
 
+def reach_problem(point, robot_base_xy, table_height_m: float) -> str | None:
+    """Why the hand cannot bring its grasp point to `point` (world, m) from above, or None: the wrist,
+    WRIST_ABOVE_TCP_M over it, would be beyond REACH_M from the shoulder, or the point is under the table."""
+    point = np.asarray(point, dtype=np.float64)
+    shoulder = np.array([*robot_base_xy, table_height_m + SHOULDER_HEIGHT_M])
+    distance = float(np.linalg.norm(point + np.array([0.0, 0.0, WRIST_ABOVE_TCP_M]) - shoulder))
+    if distance > REACH_M:
+        return (
+            f"{np.round(point, 3).tolist()} needs the wrist {distance:.2f} m from the shoulder (reach {REACH_M:.2f} m)"
+        )
+    if point[2] < table_height_m - 0.01:
+        return f"{np.round(point, 3).tolist()} is below the table"
+    return None
+
+
 def refused(message: str) -> Outcome:
     return Outcome(False, message)
 
@@ -113,16 +128,7 @@ class ManipulationSession:
         return np.asarray(displacement, dtype=np.float64)
 
     def _reach_problem(self, point: np.ndarray) -> str | None:
-        shoulder = np.array([*self.robot_base_xy, self.table_height_m + SHOULDER_HEIGHT_M])
-        distance = float(np.linalg.norm(point + np.array([0.0, 0.0, WRIST_ABOVE_TCP_M]) - shoulder))
-        if distance > REACH_M:
-            return (
-                f"{np.round(point, 3).tolist()} needs the wrist {distance:.2f} m from the shoulder "
-                f"(reach {REACH_M:.2f} m)"
-            )
-        if point[2] < self.table_height_m - 0.01:
-            return f"{np.round(point, 3).tolist()} is below the table"
-        return None
+        return reach_problem(point, self.robot_base_xy, self.table_height_m)
 
     def request(
         self,
