@@ -466,7 +466,9 @@ class PlanNode(Node):
             ids = sorted(o.id for o in latest.objects) if latest else []
             busy = self._busy
         objects = len(ids)
+        _, joint_problem = self._robot_state()
         values = {
+            "joint_states": joint_problem or "ok",
             "goals": self.goals,
             "refusals": self.refusals,
             "busy": busy,
