@@ -4,7 +4,8 @@
 
 Each seed runs the whole node graph once (`demo --seed S`, realistic domain) into OUT/seed_<S>/; a
 seed whose summary.json exists is not run again (resume). Writes OUT/summary.json and OUT/report.md:
-per seed the target chosen and why, met in the twin, done in the simulator, or why no goal was sent.
+per seed the attempts, the last target chosen and why, met in the twin, done in the simulator, or why
+no goal was sent; the count done, and done at the first attempt.
 """
 
 import argparse
@@ -80,6 +81,8 @@ def main(argv=None) -> int:
             "target_id": task.get("target_id"),
             "why": task.get("why") or task.get("error") or summary.get("error"),
             "planned_success": task.get("planned_success"),
+            "attempts": len(task.get("attempts") or []),
+            "done_at_first_attempt": bool(task.get("done_at_first_attempt")),
             "target_displacement_m": task.get("target_displacement_m"),
             "wall_s": summary.get("wall_s"),
         })  # fmt: skip
@@ -89,6 +92,7 @@ def main(argv=None) -> int:
         "objects": args.objects,
         "seeds": args.seeds,
         "done": done,
+        "done_at_first_attempt": sum(r["done_at_first_attempt"] for r in rows),
         "runs": len(rows),
         "done_interval_90": list(wilson_interval(done, len(rows))),
         "no_target": sum(r["outcome"] == "no target" for r in rows),
@@ -100,15 +104,16 @@ def main(argv=None) -> int:
         f"# bench_demo: `demo --task {args.task}` over {len(rows)} scenes ({args.objects} objects)",
         "",
         f"Done in the simulator: {done} of {len(rows)} (90 % interval {total['done_interval_90'][0]:.2f}-"
-        f"{total['done_interval_90'][1]:.2f}); no suitable target: {total['no_target']}; errors: {total['errors']}.",
+        f"{total['done_interval_90'][1]:.2f}); at the first attempt: {total['done_at_first_attempt']}; "
+        f"no suitable target: {total['no_target']}; errors: {total['errors']}.",
         "",
-        "| seed | outcome | instances | target | met in the twin | target moved (m) | why |",
-        "|---|---|---|---|---|---|---|",
+        "| seed | outcome | attempts | instances | target | met in the twin | target moved (m) | why |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['seed']} | {r['outcome']} | {r['instances']} | {r['target_id']} | {r['planned_success']} | "
-            f"{r['target_displacement_m']} | {r['why']} |"
+            f"| {r['seed']} | {r['outcome']} | {r['attempts']} | {r['instances']} | {r['target_id']} | "
+            f"{r['planned_success']} | {r['target_displacement_m']} | {r['why']} |"
         )
     atomic_write_text(args.out / "report.md", "\n".join(lines) + "\n")
     print(f"{done}/{len(rows)} done -> {args.out / 'summary.json'}")

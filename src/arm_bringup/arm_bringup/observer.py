@@ -64,6 +64,18 @@ class Observer:
                 return True
         return False
 
+    def newer(self, topic: str, stamp, timeout_s: float):
+        """The first message on topic stamped after `stamp` (a builtin_interfaces Time), or None when
+        none came within timeout_s."""
+        after_ns = time_ns(stamp)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+            msg = self.latest.get(topic)
+            if msg is not None and time_ns(msg.header.stamp) > after_ns:
+                return msg
+        return None
+
     def frame(self):
         rgb = image_to_numpy(self.latest["camera/color/image_raw"])
         depth = depth_to_metres(self.latest["camera/depth/image_raw"])

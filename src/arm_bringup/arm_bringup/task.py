@@ -9,21 +9,35 @@ import time
 
 import numpy as np
 import rclpy
+from control_msgs.action import FollowJointTrajectory
 from rclpy.action import ActionClient
 
 from arm_bringup.scenes import objects_to_scene
 from arm_interfaces.action import Manipulate
+from arm_planner.messages import trajectory_msg
 from arm_planner.session import reach_problem
 from arm_planner.tasks.base import narrowest_horizontal_width_m
+from arm_ros.conversions.images import image_to_numpy
 from arm_ros.conversions.meshes import msg_to_mesh
 from arm_ros.conversions.poses import pose_to_matrix
-from arm_sim.robot import FINGER_GAP_OPEN_M
+from arm_sim.robot import FINGER_GAP_OPEN_M, FINGER_JOINT_NAMES, HOME_Q, JOINT_NAMES
 from arm_sim.world import ROBOT_BASE_XY
 
 # Side room a grasp leaves between the object and each finger, metres.
 GRASP_SIDE_ROOM_M = 0.005
 # Candidates, most visible first, planned without executing before one is chosen.
-DRY_RUNS = 3
+DRY_RUNS = 5
+# Attempts at a grasp: one whose fingers closed on nothing is tried again on a new view.
+ATTEMPTS = 3
+# A finger closed to this or less (m) holds nothing (a lamp held by its 3 mm stem reads 1.6 mm).
+EMPTY_GRASP_M = 0.001
+# Before the scene is observed again the arm goes back to its home pose, out of the camera's way.
+HOME_MOTION_S = 2.5
+ARM_CONTROLLER_ACTION = "arm_controller/follow_joint_trajectory"
+# Objects of a new view within this of a target tried before (m) are that object.
+SAME_OBJECT_M = 0.05
+MESHES_TOPIC = "arm/meshes"
+NEW_MESHES_TIMEOUT_S = 60.0
 
 
 def rank_targets(objects, task: str, table_height_m: float = 0.0):
@@ -79,8 +93,8 @@ def send_and_wait(node, client, goal, timeout_s: float = 400.0):
 
 
 def choose_by_dry_runs(node, client, meshes, task: str, candidates: list):
-    """(target, why, dry runs): the first of up to DRY_RUNS candidates whose plan-only request met the
-    task in the planner's twin; the most visible candidate when none did."""
+    """(target or None, why, dry runs): the first of up to DRY_RUNS candidates whose plan-only request
+    met the task in the planner's twin; None when none did (a plan predicted to fail is not executed)."""
     runs = []
     for candidate in candidates[:DRY_RUNS]:
         result = send_and_wait(node, client, task_goal(task, candidate, meshes, plan_only=True))
@@ -90,29 +104,77 @@ def choose_by_dry_runs(node, client, meshes, task: str, candidates: list):
             tried = f"{len(runs)} of {min(len(candidates), DRY_RUNS)} tried"
             seen = f"visible {candidate.visible_fraction:.0%}"
             return candidate, f"object {candidate.id} ({seen}): its dry run met the task in the twin ({tried})", runs
-    target = candidates[0]
-    why = f"object {target.id}, the most visible: no dry run of the {len(runs)} tried met the task in the twin"
-    return target, why, runs
+    return None, f"no dry run of the {len(runs)} tried met the task in the twin", runs
 
 
-def run_task(node, observer, meshes, truth, task: str) -> dict:
-    """Choose a target by dry runs in the planner's twin, send the manipulation request and judge it in
-    the sim by how the true object moved."""
-    client = ActionClient(node, Manipulate, "arm/manipulate")
-    if not client.wait_for_server(timeout_sec=60.0):
-        return {"error": "plan_node action server not available"}
-    candidates, why = rank_targets(meshes.objects, task, meshes.table_height_m)
+def finger_opening_m(joint_states) -> float | None:
+    """The gripper finger's position (m, 0 = closed) in a JointState, or None without it."""
+    names = list(joint_states.name)
+    if FINGER_JOINT_NAMES[0] not in names:
+        return None
+    return float(joint_states.position[names.index(FINGER_JOINT_NAMES[0])])
+
+
+def truth_positions(poses) -> np.ndarray:
+    """[N, 3] world positions (m) of the true objects (sim/ground_truth/poses; id i at row i - 1)."""
+    return np.array([pose_to_matrix(p)[:3, 3] for p in poses.poses]).reshape(-1, 3)
+
+
+def truth_of_target(target, observer, meshes, truth) -> int:
+    """The ground-truth id of a reconstructed target: the true object under most of its pixels in the
+    segmented frame the meshes were built from, else the one whose centre is nearest its centre."""
+    segmented = observer.segmented_frame_for(meshes.header)
+    labels = observer.latest.get("sim/ground_truth/labels")
+    if segmented is not None and labels is not None:
+        true_labels, instances = image_to_numpy(labels), image_to_numpy(segmented.labels)
+        true_ids = true_labels[instances == target.id] if true_labels.shape == instances.shape else []
+        true_ids = np.asarray(true_ids, dtype=np.int64)
+        true_ids = true_ids[true_ids > 0]
+        if true_ids.size:
+            return int(np.bincount(true_ids).argmax())
+    centre = pose_to_matrix(target.pose)[:3, 3]
+    centres = truth_centres(truth, observer.latest["sim/ground_truth/poses"])
+    return min(centres, key=lambda g: np.linalg.norm(g[1] - centre))[0]
+
+
+def truth_centres(truth, poses) -> list[tuple[int, np.ndarray]]:
+    """(ground-truth id, world centre m) of every true object at its current pose (sim/ground_truth/poses)."""
+    _, placed = objects_to_scene(truth)
+    centres = []
+    for (gt_id, mesh), obj in zip(placed, truth.objects, strict=True):
+        T_now_then = pose_to_matrix(poses.poses[gt_id - 1]) @ np.linalg.inv(pose_to_matrix(obj.pose))
+        centres.append((gt_id, T_now_then[:3, :3] @ mesh.centroid + T_now_then[:3, 3]))
+    return centres
+
+
+def far_from(objects, points_m, distance_m: float) -> list:
+    """The objects whose centre is more than distance_m from every point (world, m)."""
+    return [
+        o for o in objects
+        if all(np.linalg.norm(pose_to_matrix(o.pose)[:3, 3] - p) > distance_m for p in points_m)
+    ]  # fmt: skip
+
+
+def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list) -> dict:
+    """One attempt: choose a target by dry runs among the objects not tried before (tried_m: their
+    centres), execute its plan and judge it in the sim by how the true object moved; `held` is the
+    robot's own verdict on a grasp, from its fingers (closed on nothing or not)."""
+    objects = far_from(meshes.objects, tried_m, SAME_OBJECT_M)
+    candidates, why = rank_targets(objects, task, meshes.table_height_m)
+    if tried_m:
+        why = f"{len(meshes.objects) - len(objects)} object(s) tried before left out; {why}"
     if not candidates:
-        print(f"[demo] {task}: no target: {why}", flush=True)
         return {"task": task, "target_id": None, "why": why, "success_in_sim": None}
     target, chosen, dry_runs = choose_by_dry_runs(node, client, meshes, task, candidates)
     why = f"{why}; {chosen}"
+    if target is None:
+        return {"task": task, "target_id": None, "why": why, "dry_runs": dry_runs, "success_in_sim": None}
     print(f"[demo] {task} target: {why}", flush=True)
     goal = task_goal(task, target, meshes)
     T_target = pose_to_matrix(target.pose)
-    _, gt = objects_to_scene(truth)
-    gt_id, _ = min(gt, key=lambda g: np.linalg.norm(g[1].centroid - T_target[:3, 3]))
-    start = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
+    poses_topic = "sim/ground_truth/poses"
+    gt_id = truth_of_target(target, observer, meshes, truth)
+    starts = truth_positions(observer.latest[poses_topic])
     t0 = time.monotonic()
     result = send_and_wait(node, client, goal)
     if result is None:
@@ -125,18 +187,21 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
     # the sim executes the published trajectory in simulated time (50 joint states per simulated second)
     wanted_states = observer.counts.get("joint_states", 0) + int(duration * 50) + 50
     observer.wait(["joint_states"], duration * 4 + 20.0, wanted_states)
-    observer.wait(["sim/ground_truth/poses"], 10.0, observer.counts.get("sim/ground_truth/poses", 0) + 2)
-    end = pose_to_matrix(observer.latest["sim/ground_truth/poses"].poses[gt_id - 1])[:3, 3]
-    moved = end - start
+    observer.wait([poses_topic], 10.0, observer.counts.get(poses_topic, 0) + 2)
+    ends = truth_positions(observer.latest[poses_topic])
+    moved = ends[gt_id - 1] - starts[gt_id - 1]
+    lifted = [i + 1 for i in np.flatnonzero(ends[:, 2] - starts[:, 2] >= 0.05)]
     if task == "grasp":
         success, error = bool(moved[2] >= 0.05), max(0.0, 0.05 - float(moved[2]))
     else:
         wanted = np.array([goal.goal_displacement.x, goal.goal_displacement.y])
         error = float(np.linalg.norm(moved[:2] - wanted))
         success = error <= 0.025
+    opening = finger_opening_m(observer.latest["joint_states"])
     return {
         "task": task,
         "target_id": int(target.id),
+        "target_centre_m": np.round(T_target[:3, 3], 4).tolist(),
         "why": why,
         "dry_runs": dry_runs,
         "truth_id": int(gt_id),
@@ -152,9 +217,50 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
             if result.displacement_observed
             else None
         ),
+        "finger_opening_m": None if opening is None else round(opening, 4),
+        "held": bool(task == "grasp" and opening is not None and opening > EMPTY_GRASP_M),
         "planning_s": round(plan_s, 1),
         "trajectory_s": round(duration, 2),
         "target_displacement_m": np.round(moved, 4).tolist(),
+        "truth_ids_lifted": [int(i) for i in lifted],
         "success_in_sim": success,
         "error_in_sim_m": round(error, 4),
     }
+
+
+def go_home(node, client) -> str:
+    """Move the arm to its home pose through the arm controller; how that ended."""
+    if not client.wait_for_server(timeout_sec=10.0):
+        return f"{ARM_CONTROLLER_ACTION} not available"
+    goal = FollowJointTrajectory.Goal(trajectory=trajectory_msg(JOINT_NAMES, [HOME_MOTION_S], [HOME_Q]))
+    result = send_and_wait(node, client, goal, timeout_s=60.0)
+    return "no result" if result is None else f"error code {result.error_code}: {result.error_string}"
+
+
+def run_task(node, observer, meshes, truth, task: str) -> dict:
+    """Up to ATTEMPTS attempts (attempt_task): after a grasp whose fingers closed on nothing the arm
+    goes home and the task is tried again on the next reconstruction of the scene, leaving out the
+    objects tried. The last
+    attempt's report, with every attempt under "attempts"."""
+    client = ActionClient(node, Manipulate, "arm/manipulate")
+    if not client.wait_for_server(timeout_sec=60.0):
+        return {"error": "plan_node action server not available"}
+    home_client = ActionClient(node, FollowJointTrajectory, ARM_CONTROLLER_ACTION)
+    attempts, tried_m = [], []
+    while True:
+        attempt = attempt_task(node, client, observer, meshes, truth, task, tried_m)
+        attempts.append(attempt)
+        if attempt.get("target_id") is None:
+            print(f"[demo] {task}: no target: {attempt.get('why') or attempt.get('error')}", flush=True)
+        if attempt.get("target_id") is None or task != "grasp" or attempt["held"] or len(attempts) == ATTEMPTS:
+            break
+        print(f"[demo] attempt {len(attempts)}: the fingers closed on nothing; observing the scene again", flush=True)
+        tried_m.append(np.asarray(attempt["target_centre_m"]))
+        attempt["home"] = go_home(node, home_client)
+        meshes = observer.newer(MESHES_TOPIC, observer.latest["joint_states"].header.stamp, NEW_MESHES_TIMEOUT_S)
+        if meshes is None:
+            break
+    report = dict(next((a for a in reversed(attempts) if a.get("target_id") is not None), attempts[-1]))
+    report["attempts"] = attempts
+    report["done_at_first_attempt"] = bool(attempts[0].get("success_in_sim"))
+    return report

@@ -34,3 +34,19 @@ def test_the_segmented_frame_of_a_mesh_array_is_found_by_stamp_and_old_frames_ar
         node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_a_message_newer_than_a_stamp_is_awaited_and_an_older_one_is_not_taken():
+    use_private_domain()
+    rclpy.init()
+    try:
+        node = rclpy.create_node("observer_newer_test")
+        observer = Observer(node)
+        observer._store("arm/segmented_frame", _frame(10))
+        after = _frame(10).header.stamp
+        assert observer.newer("arm/segmented_frame", after, timeout_s=0.2) is None, "not newer"
+        observer._store("arm/segmented_frame", _frame(11))
+        assert observer.newer("arm/segmented_frame", after, timeout_s=0.2).header.stamp.sec == 11
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()

@@ -1,7 +1,8 @@
 import numpy as np
 import trimesh
+from sensor_msgs.msg import JointState
 
-from arm_bringup.task import rank_targets
+from arm_bringup.task import EMPTY_GRASP_M, SAME_OBJECT_M, far_from, finger_opening_m, rank_targets
 from arm_interfaces.msg import ReconstructedObject
 from arm_ros.conversions.meshes import mesh_to_msg
 from arm_sim.world import ROBOT_BASE_XY
@@ -36,3 +37,20 @@ def test_no_target_suits_the_task_and_the_reason_says_why():
     assert not candidates and "fits between the open fingers" in why
     candidates, why = rank_targets([far], "push")
     assert not candidates and "reach" in why and "1.50 m from the shoulder" in why
+
+
+def test_a_new_view_leaves_out_the_objects_tried_before_and_keeps_the_others():
+    tried = _object(1, (0.05, 0.05, 0.1), (0.10, 0.0), 1.0)
+    nudged = _object(2, (0.05, 0.05, 0.1), (0.10 + 0.8 * SAME_OBJECT_M, 0.0), 1.0)
+    other = _object(3, (0.05, 0.05, 0.1), (0.10, 2.0 * SAME_OBJECT_M), 1.0)
+    tried_m = [np.array([0.10, 0.0, 0.05])]
+    assert [o.id for o in far_from([tried, nudged, other], tried_m, SAME_OBJECT_M)] == [3]
+    assert [o.id for o in far_from([tried, other], [], SAME_OBJECT_M)] == [1, 3]
+
+
+def test_the_fingers_say_whether_a_grasp_holds_something():
+    state = JointState(name=["panda_joint1", "panda_finger_joint1"], position=[0.3, 0.0016])
+    assert finger_opening_m(state) > EMPTY_GRASP_M, "a lamp held by its thin stem"
+    state.position = [0.3, -0.0]
+    assert finger_opening_m(state) <= EMPTY_GRASP_M, "closed on nothing"
+    assert finger_opening_m(JointState(name=["panda_joint1"], position=[0.3])) is None

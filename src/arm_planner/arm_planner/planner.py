@@ -90,6 +90,15 @@ class PlannerConfig:
     )
     min_paths: int = setting(8, "Fewest paths per step when planning in real time", 2, 1000)
     settle_s: float = setting(0.3, "Twin: settling with the robot still before planning, s", 0.0, 5.0, parameter=True)
+    # The camera saw the target at rest: where its reconstruction falls over while the twin settles,
+    # a plan grasps or pushes where the object is not (the bench_real stability criterion).
+    rest_check_s: float = setting(1.0, "Twin: how long the target must rest with the robot still, s", 0.0, 10.0)
+    settle_motion_m: float = setting(
+        0.02, "Twin: refuse a target that moves more than this in rest_check_s, m", 0.0, float("inf")
+    )
+    settle_turn_deg: float = setting(
+        15.0, "Twin: refuse a target that turns more than this in rest_check_s, degrees", 0.0, 180.0
+    )
     twin_overlap_exclude_m: float = setting(
         OVERLAP_EXCLUDE_M, "Twin: objects overlapping deeper than this as built do not collide, m", 0.0, float("inf")
     )
@@ -165,6 +174,13 @@ def resume_point(states: list[str], executed_steps: int) -> tuple[str, int]:
     state = prefix[-1]
     steps_in_state = next((i for i, s in enumerate(reversed(prefix)) if s != state), len(prefix))
     return state, steps_in_state
+
+
+def settled_motion(seen_pos: np.ndarray, seen_rot: np.ndarray, body) -> tuple[float, float]:
+    """(distance m, turn degrees) of a body from where it was seen (world position, rotation matrix)."""
+    rotation = body.xmat.reshape(3, 3) @ seen_rot.T
+    turn = np.degrees(np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)))
+    return float(np.linalg.norm(body.xpos - seen_pos)), float(turn)
 
 
 class Planner:
@@ -297,6 +313,27 @@ class Planner:
         _, _, com, _ = reward.poses(state[None])
         return reward.met(com[0], tolerance_m)
 
+    def _motion_at_rest(self, data: mujoco.MjData, body: str, seen_pos: np.ndarray, seen_rot: np.ndarray):
+        """(distance m, turn degrees) of `body` from where it was seen, once the twin in `data` (settled
+        for settle_s) has run on to rest_check_s with the robot still, in a copy. A slow
+        topple moves little in the settling time and then falls over while the robot approaches."""
+        more = int(round((self.config.rest_check_s - self.config.settle_s) / self.model.opt.timestep))
+        if more <= 0:
+            return settled_motion(seen_pos, seen_rot, data.body(body))
+        check = mujoco.MjData(self.model)
+        mujoco.mj_copyData(check, self.model, data)
+        mujoco.mj_step(self.model, check, nstep=more)
+        return settled_motion(seen_pos, seen_rot, check.body(body))
+
+    def _refused(self, message: str) -> PlanResult:
+        """A result without a plan."""
+        robot = self.robot
+        controls = np.zeros((0, self.model.nu))
+        return PlanResult(
+            False, message, float("inf"), np.zeros(0), controls, robot.spec.trajectory_joint_names,
+            controls[:, robot.actuators], [], np.zeros(0),
+        )  # fmt: skip
+
     def plan(
         self,
         initial_state: np.ndarray,
@@ -318,8 +355,19 @@ class Planner:
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
         ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], reward.gripper_closed, model.nu)
         data.ctrl[:] = ctrl
+        mujoco.mj_kinematics(model, data)
+        seen = data.body(request.target_body)
+        seen_pos, seen_rot = seen.xpos.copy(), seen.xmat.reshape(3, 3).copy()
         mujoco.mj_step(model, data, nstep=int(round(cfg.settle_s / model.opt.timestep)))
         data.time = 0.0
+        if request.resume_state is None:
+            moved = self._motion_at_rest(data, request.target_body, seen_pos, seen_rot)
+            if moved[0] > cfg.settle_motion_m or moved[1] > cfg.settle_turn_deg:
+                return self._refused(
+                    f"the target's reconstruction does not rest where the camera saw it: it moved "
+                    f"{moved[0] * 100:.1f} cm and turned {moved[1]:.0f} degrees in {cfg.rest_check_s:.1f} s "
+                    "of the twin with the robot still"
+                )
         if cfg.sleep_objects:
             set_sleep(model, self._object_trees, start_asleep=True)
         self._rest_objects_here(data)

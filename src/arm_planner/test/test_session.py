@@ -99,3 +99,25 @@ def test_a_grasp_the_gripper_cannot_hold_is_refused_as_infeasible_and_a_rearrang
         assert type(s.planner._last_reward).__name__ == "PushReward"
     finally:
         s.close()
+
+
+@pytest.mark.parametrize("tilt_deg", [24.0, 25.0, 26.0])
+def test_a_target_that_falls_over_in_the_twin_is_refused_with_the_reason(tilt_deg):
+    """The camera saw each object at rest: a reconstruction that topples while the twin settles (a
+    16 cm bar leaning 24-26 degrees on one edge) gets no plan, while one that stands is planned."""
+    bar = trimesh.creation.box(extents=(0.02, 0.02, 0.16))
+    leaning = np.eye(4)
+    leaning[:3, :3] = trimesh.transformations.rotation_matrix(np.radians(tilt_deg), (1, 0, 0))[:3, :3]
+    leaning[:3, 3] = (0.1, -0.1, -bar.copy().apply_transform(leaning).bounds[0, 2])
+    standing = np.eye(4)
+    standing[:3, 3] = (0.1, 0.1, 0.08)
+    config = PlannerConfig(mppi=MppiConfig(steps=2, nthread=1), realtime_factor=0.0)
+    s = ManipulationSession(config, 0.01)
+    try:
+        s.set_objects([TwinObject(1, leaning, bar, [bar]), TwinObject(2, standing, bar, [bar])], 0.0)
+        fallen = _ask(s, target=1)
+        assert not fallen.planned and not fallen.success
+        assert "does not rest where the camera saw it" in fallen.message
+        assert _ask(s, target=2).planned
+    finally:
+        s.close()
