@@ -161,7 +161,7 @@ def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list
     robot's own verdict on a grasp, from its fingers (closed on nothing or not)."""
     objects = far_from(meshes.objects, tried_m, SAME_OBJECT_M)
     candidates, why = rank_targets(objects, task, meshes.table_height_m)
-    if tried_m:
+    if len(objects) < len(meshes.objects):
         why = f"{len(meshes.objects) - len(objects)} object(s) tried before left out; {why}"
     if not candidates:
         return {"task": task, "target_id": None, "why": why, "success_in_sim": None}

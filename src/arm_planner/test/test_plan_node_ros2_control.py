@@ -118,6 +118,9 @@ def test_with_no_controller_running_the_result_says_so(graph):
     session, controllers, node, client, action = graph
     from arm_planner.controller_client import ControllerClient
 
+    meshes = client.create_publisher(ReconstructedObjectArray, "arm/meshes", latched_qos())
+    meshes.publish(_meshes(client, (0.0, 0.0, 0.04), client.get_clock().now().nanoseconds + int(10e9)))
+    time.sleep(0.5)  # the box at rest again (the last test's frame showed it lifted)
     real = node.controllers
     node.controllers = ControllerClient(node, "absent_arm_controller", "absent_gripper", node.finger_joint, 10.0)
     config = node.config
