@@ -194,8 +194,10 @@ def run_planner_bad_inputs(probe, process, goal_timeout_s: float = 120.0, crowde
     # the first goal waits until the node holds meshes and fresh joint states (a loaded machine can
     # take seconds to match the subscriptions); every later case is sent at once
     probe.wait_until(
-        lambda: probe.diagnostic(node).get("joint_states") == "ok"
-        and probe.diagnostic_number(node, "meshes_received", 0) >= 1,
+        lambda: (
+            probe.diagnostic(node).get("joint_states") == "ok"
+            and probe.diagnostic_number(node, "meshes_received", 0) >= 1
+        ),
         30.0,
     )
     record("valid goal (before)", "valid", goal(target_id=1), False)
