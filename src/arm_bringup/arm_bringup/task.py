@@ -16,6 +16,7 @@ from arm_bringup.scenes import objects_to_scene
 from arm_interfaces.action import Manipulate
 from arm_planner.messages import trajectory_msg
 from arm_planner.session import reach_problem
+from arm_planner.tasks import GRASP_LIFT_M
 from arm_planner.tasks.base import narrowest_horizontal_width_m
 from arm_ros.conversions.images import image_to_numpy
 from arm_ros.conversions.meshes import msg_to_mesh
@@ -115,6 +116,15 @@ def finger_opening_m(joint_states) -> float | None:
     return float(joint_states.position[names.index(FINGER_JOINT_NAMES[0])])
 
 
+def grasp_held(task: str, finger_m: float | None, observed_m: list | None) -> bool:
+    """The robot's own verdict on a grasp: its fingers did not close on nothing, and a view after the
+    motion, where it shows the target, does not show it left behind (risen less than half of the
+    lift a grasp must make). A finger reads 1-2 mm on a thin stem and on a slipped edge alike."""
+    if task != "grasp" or finger_m is None or finger_m <= EMPTY_GRASP_M:
+        return False
+    return observed_m is None or observed_m[2] >= 0.5 * GRASP_LIFT_M
+
+
 def truth_positions(poses) -> np.ndarray:
     """[N, 3] world positions (m) of the true objects (sim/ground_truth/poses; id i at row i - 1)."""
     return np.array([pose_to_matrix(p)[:3, 3] for p in poses.poses]).reshape(-1, 3)
@@ -192,12 +202,17 @@ def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list
     moved = ends[gt_id - 1] - starts[gt_id - 1]
     lifted = [i + 1 for i in np.flatnonzero(ends[:, 2] - starts[:, 2] >= 0.05)]
     if task == "grasp":
-        success, error = bool(moved[2] >= 0.05), max(0.0, 0.05 - float(moved[2]))
+        success, error = bool(moved[2] >= GRASP_LIFT_M), max(0.0, GRASP_LIFT_M - float(moved[2]))
     else:
         wanted = np.array([goal.goal_displacement.x, goal.goal_displacement.y])
         error = float(np.linalg.norm(moved[:2] - wanted))
         success = error <= 0.025
     opening = finger_opening_m(observer.latest["joint_states"])
+    observed = (
+        [result.observed_displacement.x, result.observed_displacement.y, result.observed_displacement.z]
+        if result.displacement_observed
+        else None
+    )
     return {
         "task": task,
         "target_id": int(target.id),
@@ -210,15 +225,9 @@ def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list
         "predicted_error_m": round(float(result.final_error_m), 4),
         "controller_error_code": int(result.controller_error_code),
         "controller_message": result.controller_message,
-        "observed_displacement_m": (
-            np.round(
-                [result.observed_displacement.x, result.observed_displacement.y, result.observed_displacement.z], 4
-            ).tolist()
-            if result.displacement_observed
-            else None
-        ),
+        "observed_displacement_m": None if observed is None else np.round(observed, 4).tolist(),
         "finger_opening_m": None if opening is None else round(opening, 4),
-        "held": bool(task == "grasp" and opening is not None and opening > EMPTY_GRASP_M),
+        "held": grasp_held(task, opening, observed),
         "planning_s": round(plan_s, 1),
         "trajectory_s": round(duration, 2),
         "target_displacement_m": np.round(moved, 4).tolist(),

@@ -2,7 +2,7 @@ import numpy as np
 import trimesh
 from sensor_msgs.msg import JointState
 
-from arm_bringup.task import EMPTY_GRASP_M, SAME_OBJECT_M, far_from, finger_opening_m, rank_targets
+from arm_bringup.task import EMPTY_GRASP_M, SAME_OBJECT_M, far_from, finger_opening_m, grasp_held, rank_targets
 from arm_interfaces.msg import ReconstructedObject
 from arm_ros.conversions.meshes import mesh_to_msg
 from arm_sim.world import ROBOT_BASE_XY
@@ -54,3 +54,12 @@ def test_the_fingers_say_whether_a_grasp_holds_something():
     state.position = [0.3, -0.0]
     assert finger_opening_m(state) <= EMPTY_GRASP_M, "closed on nothing"
     assert finger_opening_m(JointState(name=["panda_joint1"], position=[0.3])) is None
+
+
+def test_a_grasp_holds_when_the_fingers_are_apart_and_no_view_shows_the_target_left_behind():
+    assert grasp_held("grasp", 0.0016, None), "a thin stem between the fingers, the target out of view"
+    assert grasp_held("grasp", 0.012, [0.0, 0.01, 0.08])
+    assert not grasp_held("grasp", 0.0, None), "closed on nothing"
+    assert not grasp_held("grasp", 0.0019, [-0.005, -0.03, -0.009]), "seen where it was: an edge slipped"
+    assert not grasp_held("push", 0.012, None)
+    assert not grasp_held("grasp", None, None), "no finger reading"
