@@ -234,7 +234,6 @@ class PlanNode(Node):
         resume: tuple | None,
         start_com,
         stream: TrajectoryStream | None = None,
-        realtime: bool = True,
     ) -> Outcome:
         joints, problem = self._robot_state()
         if problem:
@@ -270,7 +269,6 @@ class PlanNode(Node):
             resume_state=resume[0] if resume else None,
             resume_steps_in_state=resume[1] if resume else 0,
             stream=on_control if stream is not None else None,
-            realtime=realtime,
         )
         plan_s = time.perf_counter() - started
         if stream is not None:
@@ -371,9 +369,7 @@ class PlanNode(Node):
                 return outcome, JointTrajectory()
             result = outcome.result
             return outcome, trajectory_msg(result.joint_names, result.times_s, result.joint_positions)
-        # a dry run moves nothing while it is planned: it samples every path, whatever realtime_factor
-        realtime = mode != "plan_only"
-        outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None, realtime=realtime)
+        outcome = self._plan_once(goal_handle, task, goal, scene, target_id, None, None)
         if not outcome.planned:
             return outcome, JointTrajectory()
         if mode == "plan_only":

@@ -343,11 +343,9 @@ class Planner:
         should_stop: Callable[[], bool] | None = None,
         observe: Observe | None = None,
         stream: Stream | None = None,
-        realtime: bool = True,
     ) -> PlanResult:
         """Plan from a twin state vector (STATE_SPEC); the robot starts at its qpos, gripper open.
-        With `observe`, each executed step can be corrected by the real state (closed loop).
-        realtime False: every step samples num_paths whatever realtime_factor (a plan nothing waits on)."""
+        With `observe`, each executed step can be corrected by the real state (closed loop)."""
         cfg = self.config
         model, data, robot = self.model, self._data, self.robot
         reward = self._last_reward = self._reward(request, geometry)
@@ -380,7 +378,7 @@ class Planner:
             PathBudget(
                 cfg.mppi.num_paths, min(cfg.min_paths, cfg.mppi.num_paths), cfg.realtime_factor, cfg.mppi.control_dt_s
             )
-            if cfg.realtime_factor > 0 and realtime
+            if cfg.realtime_factor > 0
             else None
         )
         met_streak, met, error, held = 0, False, float("inf"), False

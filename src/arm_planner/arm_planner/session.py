@@ -145,10 +145,8 @@ class ManipulationSession:
         resume_steps_in_state: int = 0,
         observe: Observe | None = None,
         stream: Stream | None = None,
-        realtime: bool = True,
     ) -> Outcome:
-        """Plan `task` on object `target_id` from the given robot state; never raises on bad input.
-        realtime False: a plan nothing waits on samples every path (Planner.plan)."""
+        """Plan `task` on object `target_id` from the given robot state; never raises on bad input."""
         if task not in TASKS:
             return refused(f"unknown task {task!r}; expected one of {list(TASKS)}")
         if self.objects is None:
@@ -203,7 +201,6 @@ class ManipulationSession:
                 should_stop=should_stop,
                 observe=observe,
                 stream=stream,
-                realtime=realtime,
             )
         except TaskInfeasible as error:
             return Outcome(False, f"infeasible: {error}", skipped=dict(twin.skipped), infeasible=True)
