@@ -263,7 +263,7 @@ def run_task(node, observer, meshes, truth, task: str) -> dict:
             print(f"[demo] {task}: no target: {attempt.get('why') or attempt.get('error')}", flush=True)
         if attempt.get("target_id") is None or task != "grasp" or attempt["held"] or len(attempts) == ATTEMPTS:
             break
-        print(f"[demo] attempt {len(attempts)}: the fingers closed on nothing; observing the scene again", flush=True)
+        print(f"[demo] attempt {len(attempts)}: the grasp holds nothing; observing the scene again", flush=True)
         tried_m.append(np.asarray(attempt["target_centre_m"]))
         attempt["home"] = go_home(node, home_client)
         meshes = observer.newer(MESHES_TOPIC, observer.latest["joint_states"].header.stamp, NEW_MESHES_TIMEOUT_S)
