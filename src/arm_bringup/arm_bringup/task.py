@@ -2,8 +2,9 @@
 first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS of them
 are planned without executing (plan_only goals); the first whose plan meets the task in the planner's
 twin is the target, and the same goal without plan_only executes that very plan (plan_node keeps it),
-judged in the simulator by how the true object moved. Where no object suits the task, no goal is sent
-and the reason is reported."""
+judged in the simulator by how the true object moved. A grasp the robot finds empty sends the arm home
+and is tried again on the next view, up to ATTEMPTS times. Where no object suits the task, or no dry
+run meets it, nothing is executed and the reason is reported."""
 
 import time
 
@@ -28,7 +29,7 @@ from arm_sim.world import ROBOT_BASE_XY
 GRASP_SIDE_ROOM_M = 0.005
 # Candidates, most visible first, planned without executing before one is chosen.
 DRY_RUNS = 5
-# Attempts at a grasp: one whose fingers closed on nothing is tried again on a new view.
+# Attempts at a grasp: one the robot finds holds nothing (grasp_held) is tried again on a new view.
 ATTEMPTS = 3
 # A finger closed to this or less (m) holds nothing (a lamp held by its 3 mm stem reads 1.6 mm).
 EMPTY_GRASP_M = 0.001
@@ -168,7 +169,7 @@ def far_from(objects, points_m, distance_m: float) -> list:
 def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list) -> dict:
     """One attempt: choose a target by dry runs among the objects not tried before (tried_m: their
     centres), execute its plan and judge it in the sim by how the true object moved; `held` is the
-    robot's own verdict on a grasp, from its fingers (closed on nothing or not)."""
+    robot's own verdict on a grasp (grasp_held)."""
     objects = far_from(meshes.objects, tried_m, SAME_OBJECT_M)
     candidates, why = rank_targets(objects, task, meshes.table_height_m)
     if len(objects) < len(meshes.objects):
@@ -247,7 +248,7 @@ def go_home(node, client) -> str:
 
 
 def run_task(node, observer, meshes, truth, task: str) -> dict:
-    """Up to ATTEMPTS attempts (attempt_task): after a grasp whose fingers closed on nothing the arm
+    """Up to ATTEMPTS attempts (attempt_task): after a grasp that holds nothing (grasp_held) the arm
     goes home and the task is tried again on the next reconstruction of the scene, leaving out the
     objects tried. The last
     attempt's report, with every attempt under "attempts"."""
