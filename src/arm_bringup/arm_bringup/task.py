@@ -199,7 +199,7 @@ def attempt_task(node, client, observer, meshes, truth, task: str, tried_m: list
     observer.wait([poses_topic], 10.0, observer.counts.get(poses_topic, 0) + 2)
     ends = truth_positions(observer.latest[poses_topic])
     moved = ends[gt_id - 1] - starts[gt_id - 1]
-    lifted = [i + 1 for i in np.flatnonzero(ends[:, 2] - starts[:, 2] >= 0.05)]
+    lifted = [i + 1 for i in np.flatnonzero(ends[:, 2] - starts[:, 2] >= GRASP_LIFT_M)]
     if task == "grasp":
         success, error = bool(moved[2] >= GRASP_LIFT_M), max(0.0, GRASP_LIFT_M - float(moved[2]))
     else:
@@ -248,8 +248,7 @@ def go_home(node, client) -> str:
 def run_task(node, observer, meshes, truth, task: str) -> dict:
     """Up to ATTEMPTS attempts (attempt_task): after a grasp that holds nothing (grasp_held) the arm
     goes home and the task is tried again on the next reconstruction of the scene, leaving out the
-    objects tried. The last
-    attempt's report, with every attempt under "attempts"."""
+    objects tried. The last attempt's report, with every attempt under "attempts"."""
     client = ActionClient(node, Manipulate, "arm/manipulate")
     if not client.wait_for_server(timeout_sec=60.0):
         return {"error": "plan_node action server not available"}
