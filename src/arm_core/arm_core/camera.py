@@ -59,13 +59,22 @@ def fill_convex_hull(mask: np.ndarray, points_px: np.ndarray) -> None:
     hi = np.minimum(np.floor(hull.max(0) - 0.5), [width - 1, height - 1]).astype(np.int64)
     if np.any(hi < lo):
         return
-    u, v = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
+    # Row by row: each edge bounds the centres' u on one side (cross product >= 0 towards the inside).
     edges = np.roll(hull, -1, axis=0) - hull
-    pu, pv = u.reshape(-1, 1) + 0.5, v.reshape(-1, 1) + 0.5
-    cross = edges[:, 0] * (pv - hull[:, 1]) - edges[:, 1] * (pu - hull[:, 0])
-    area = np.sum(hull[:, 0] * np.roll(hull[:, 1], -1) - np.roll(hull[:, 0], -1) * hull[:, 1])
-    inside = np.all(cross * np.sign(area) >= 0, axis=1)
-    mask[v.ravel()[inside], u.ravel()[inside]] = True
+    orientation = np.sign(np.sum(hull[:, 0] * np.roll(hull[:, 1], -1) - np.roll(hull[:, 0], -1) * hull[:, 1]))
+    rows = np.arange(lo[1], hi[1] + 1)
+    pv = rows[:, None] + 0.5
+    # cross = edge_u * (pv - hull_v) - edge_v * (pu - hull_u) = level - edge_v * pu
+    level = orientation * (edges[:, 0] * (pv - hull[:, 1]) + edges[:, 1] * hull[:, 0])
+    slope = orientation * edges[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = level / slope
+    u_min = np.max(np.where(slope < 0, bound, -np.inf), axis=1)
+    u_max = np.min(np.where(slope > 0, bound, np.inf), axis=1)
+    flat_outside = np.any((slope == 0) & (level < 0), axis=1)
+    pu = np.arange(lo[0], hi[0] + 1) + 0.5
+    inside = (pu >= u_min[:, None]) & (pu <= u_max[:, None]) & ~flat_outside[:, None]
+    mask[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1] |= inside
 
 
 def silhouette(convex_parts_world, K, T_world_camera, width: int, height: int, near_m: float = 0.01) -> np.ndarray:

@@ -97,24 +97,47 @@ class _Piece:
         return 0.0 if self.final else max(self.hull_volume - self.volume, 0.0)
 
 
+def _split_hull_volumes(vertices: np.ndarray, edges: np.ndarray, axis: int, offset: float) -> float | None:
+    """Summed hull volume of the two halves of a closed mesh (vertices, edges (E, 2)) cut by the plane
+    x[axis] = offset, without cutting it: a half's hull is the hull of the vertices on its side and the
+    points where edges cross the plane. None when the plane leaves one side empty."""
+    signed = vertices[:, axis] - offset
+    above, below = signed > 0, signed < 0
+    if not above.any() or not below.any():
+        return None
+    a, b = signed[edges[:, 0]], signed[edges[:, 1]]
+    crossing = a * b < 0
+    t = (a[crossing] / (a[crossing] - b[crossing]))[:, None]
+    start, end = vertices[edges[crossing, 0]], vertices[edges[crossing, 1]]
+    section = start + t * (end - start)
+    volume = 0.0
+    for side in (above, below):
+        points = np.ascontiguousarray(np.concatenate([vertices[side], section]))
+        volume += manifold3d.Manifold.hull_points(points).volume()
+    return volume
+
+
 def _best_split(piece: _Piece, min_volume: float) -> list[_Piece] | None:
+    """The piece's two halves (split into their connected pieces over min_volume) by the candidate
+    axis-aligned plane whose halves have the least summed hull volume, or None when no plane lowers it."""
     lo, hi = (np.asarray(c) for c in np.asarray(piece.solid.bounding_box()).reshape(2, 3))
-    best_cost, best_halves = piece.hull_volume, None
+    mesh = piece.solid.to_mesh()
+    vertices = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
+    edges = np.asarray(mesh.tri_verts, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    best_cost, best_plane = piece.hull_volume, None
     for axis in range(3):
         if hi[axis] - lo[axis] <= 1e-9:
             continue
         for fraction in SPLIT_FRACTIONS:
-            offset = lo[axis] + fraction * (hi[axis] - lo[axis])
-            above, below = piece.solid.split_by_plane(tuple(_AXES[axis]), float(offset))
-            if above.is_empty() or below.is_empty():
-                continue
-            cost = above.hull().volume() + below.hull().volume()
-            if cost < best_cost - 1e-12:
-                best_cost, best_halves = cost, (above, below)
-    if best_halves is None:
+            offset = float(lo[axis] + fraction * (hi[axis] - lo[axis]))
+            cost = _split_hull_volumes(vertices, edges, axis, offset)
+            if cost is not None and cost < best_cost - 1e-12:
+                best_cost, best_plane = cost, (axis, offset)
+    if best_plane is None:
         return None
+    axis, offset = best_plane
     pieces = []
-    for half in best_halves:
+    for half in piece.solid.split_by_plane(tuple(_AXES[axis]), offset):
         pieces.extend(_Piece(c) for c in half.decompose() if c.volume() > min_volume)
     return pieces or None
 

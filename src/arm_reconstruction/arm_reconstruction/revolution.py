@@ -64,14 +64,18 @@ class RevolutionFit:
 
 
 def _solve(points: np.ndarray, slices: np.ndarray, n_slices: int) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares centre (2,) and per-slice radius (n_slices,) of circles sharing one centre."""
-    design = np.zeros((len(points), 2 + n_slices))
-    design[:, :2] = 2.0 * points[:, :2]
-    design[np.arange(len(points)), 2 + slices] = 1.0
-    target = np.einsum("ij,ij->i", points[:, :2], points[:, :2])
-    solution = np.linalg.lstsq(design, target, rcond=None)[0]
-    centre = solution[:2]
-    radii = np.sqrt(np.maximum(solution[2:] + centre @ centre, 0.0))
+    """Least-squares centre (2,) and per-slice radius (n_slices,) of circles sharing one centre:
+    |p|^2 = 2 c . p + b_k. Each slice's offset b_k is its mean residual, so c solves the 2x2 normal
+    equations of the points and targets centred per slice (the same solution as the full system)."""
+    xy = points[:, :2]
+    target = np.einsum("ij,ij->i", xy, xy)
+    counts = np.maximum(np.bincount(slices, minlength=n_slices), 1)
+    slice_xy = np.stack([np.bincount(slices, xy[:, i], n_slices) for i in range(2)], axis=1) / counts[:, None]
+    slice_target = np.bincount(slices, target, n_slices) / counts
+    centred_xy, centred_target = xy - slice_xy[slices], target - slice_target[slices]
+    centre = np.linalg.lstsq(2.0 * centred_xy.T @ centred_xy, centred_xy.T @ centred_target, rcond=None)[0]
+    offsets = slice_target - 2.0 * slice_xy @ centre
+    radii = np.sqrt(np.maximum(offsets + centre @ centre, 0.0))
     return centre, radii
 
 
