@@ -24,14 +24,14 @@ class BorderParams:
     margin: float = 0.0  # a band pixel becomes object when d_object + margin < d_background
 
 
-def nearest_pixel(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) HxW int arrays: for every pixel, a nearest pixel of the non-empty HxW bool mask
+def nearest_pixel(mask: np.ndarray, at: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of a nearest pixel of the non-empty HxW bool mask to each pixel at = (rows, cols)
     (OpenCV's 5x5 distance transform: a few times faster than an exact one, and exact this near)."""
     _, index = cv2.distanceTransformWithLabels(
         (~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE, labelType=cv2.DIST_LABEL_PIXEL
     )
-    ys, xs = np.nonzero(mask)  # row-major, the order OpenCV numbers the mask's pixels in
-    return ys[index - 1], xs[index - 1]
+    flat = np.flatnonzero(mask)  # row-major, the order OpenCV numbers the mask's pixels in
+    return np.divmod(flat[index[at] - 1], mask.shape[1])
 
 
 def instances_box(labels: np.ndarray, margin_px: int) -> tuple[slice, slice] | None:
@@ -79,10 +79,9 @@ def outline_band(labels: np.ndarray, band_px: int) -> OutlineBand | None:
     outside = cv2.erode(1 - covered, disk, borderValue=1) > 0
     if not np.any(inside) or not np.any(outside):
         return None
-    iy, ix = nearest_pixel(inside)
-    oy, ox = nearest_pixel(outside)
     rows, cols = np.nonzero(~inside & ~outside)
-    iy, ix, oy, ox = iy[rows, cols], ix[rows, cols], oy[rows, cols], ox[rows, cols]
+    iy, ix = nearest_pixel(inside, (rows, cols))
+    oy, ox = nearest_pixel(outside, (rows, cols))
     return OutlineBand(rows, cols, iy, ix, oy, ox, labels[iy, ix])
 
 
@@ -115,7 +114,10 @@ def grow_into_objectness(labels: np.ndarray, objectness: np.ndarray, threshold: 
     grow = free & (objectness[box] > threshold) & (distance <= reach_px)
     if not np.any(grow):
         return labels
-    iy, ix = nearest_pixel(~free)
+    rows, cols = np.nonzero(grow)
+    iy, ix = nearest_pixel(~free, (rows, cols))
+    grown = crop.copy()
+    grown[rows, cols] = crop[iy, ix]
     out = labels.copy()
-    out[box] = np.where(grow, crop[iy, ix], crop)
+    out[box] = grown
     return out

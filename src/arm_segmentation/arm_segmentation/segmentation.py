@@ -391,9 +391,12 @@ def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int
     holes = inside & (crop == 0) & (depth_m[box] <= 0)
     if not np.any(holes):
         return labels
-    iy, ix = nearest_pixel(crop > 0)
+    rows, cols = np.nonzero(holes)
+    iy, ix = nearest_pixel(crop > 0, (rows, cols))
+    filled = crop.copy()
+    filled[rows, cols] = crop[iy, ix]
     out = labels.copy()
-    out[box] = np.where(holes, crop[iy, ix], crop)
+    out[box] = filled
     return out
 
 

@@ -37,10 +37,11 @@ def test_no_instances_or_zero_band_leave_labels_unchanged():
 def test_nearest_pixel_is_a_nearest_mask_pixel():
     rng = np.random.default_rng(3)
     mask = rng.random((50, 70)) < 0.02
-    rows, cols = nearest_pixel(mask)
+    ys, xs = np.indices(mask.shape)
+    rows, cols = nearest_pixel(mask, (ys, xs))
     assert np.all(mask[rows, cols])
     exact, _ = ndimage.distance_transform_edt(~mask, return_indices=True)
-    found = np.hypot(rows - np.arange(50)[:, None], cols - np.arange(70)[None, :])
+    found = np.hypot(rows - ys, cols - xs)
     near = exact <= 3
     assert np.allclose(found[near], exact[near])
     assert np.all(found <= exact + 1.0)
