@@ -522,7 +522,7 @@ def cluster_instances(
 
 def _compact(labels: np.ndarray, background: int) -> np.ndarray:
     """Renumber labels to 1..K (background -> 0) keeping their order."""
-    used = np.unique(labels)
+    used = np.flatnonzero(np.bincount(labels.ravel()))  # labels are non-negative ids
     used = used[used != background]
     remap = np.zeros(int(labels.max()) + 1 if labels.size else 1, dtype=np.int64)
     remap[used] = np.arange(1, len(used) + 1)
