@@ -7,7 +7,6 @@ from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from arm_core.boxes import mask_box
 from arm_core.camera import backproject_image, organized_normals, transform_points
@@ -376,6 +375,14 @@ def segment_detailed(
     return SegmentationResult(labels, table, stage.levels, objectness, reason)
 
 
+def fill_holes(mask: np.ndarray) -> np.ndarray:
+    """HxW bool: mask with the background it encloses (not 4-connected to the image border) filled, as
+    scipy.ndimage.binary_fill_holes gives it, by one flood fill from outside."""
+    padded = np.pad(mask.astype(np.uint8), 1)
+    cv2.floodFill(padded, None, (0, 0), 2, flags=4)
+    return padded[1:-1, 1:-1] != 2
+
+
 def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int = 0) -> np.ndarray:
     """Labels with the pixels without depth that the instances enclose (dropout blobs on dark and
     shiny objects), or that their closing by a disc of radius close_px covers, given to the
@@ -384,7 +391,7 @@ def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int
     if box is None:
         return labels
     crop = labels[box]
-    inside = ndimage.binary_fill_holes(crop > 0)
+    inside = fill_holes(crop > 0)
     if close_px > 0:
         disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
         inside |= cv2.morphologyEx((crop > 0).astype(np.uint8), cv2.MORPH_CLOSE, disk) > 0
