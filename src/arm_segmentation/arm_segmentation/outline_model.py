@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from arm_segmentation.boundary import OutlineBand, instances_box, outline_band
+from arm_segmentation.clustering import channel_mean
 from arm_segmentation.perceptron import Perceptron, shared_perceptron
 
 CHECKPOINT_DIR = pathlib.Path(__file__).resolve().parent / "checkpoints"
@@ -84,7 +85,7 @@ class OutlineImage:
 
 def outline_image(rgb, depth_m, objectness, blur_px: int) -> OutlineImage:
     colour = np.asarray(cv2.blur(rgb, (blur_px, blur_px)) if blur_px > 1 else rgb, np.float32) / 255.0
-    grey = cv2.GaussianBlur(np.asarray(rgb, np.float32).mean(axis=2) / 255.0, (3, 3), 0)
+    grey = cv2.GaussianBlur(channel_mean(np.asarray(rgb, np.float32)) / 255.0, (3, 3), 0)
     gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1))
     depth = np.asarray(depth_m, np.float32)
     return OutlineImage(np.asarray(rgb), colour, gradient, depth, np.asarray(objectness, np.float32))
