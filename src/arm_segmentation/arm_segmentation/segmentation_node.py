@@ -95,7 +95,10 @@ class SegmentationNode(Node):
             msg_type, topic = TOPICS[name]
             self.create_subscription(msg_type, topic, lambda msg, i=index: self.on_message(i, msg), qos)
         self.pub_estimated_pose = self.create_publisher(PoseStamped, "camera/pose/estimated", 10)
-        self.pub_frame = self.create_publisher(SegmentedFrame, "arm/segmented_frame", 10)
+        # Reliable, but only the newest frames are kept for a reader that has not acknowledged them: each
+        # is about 2.8 MB (640x480), and a history of 10 grew the node by about 25 MB when the
+        # reconstruction node fell behind. Its reader keeps one frame and reconstructs the newest.
+        self.pub_frame = self.create_publisher(SegmentedFrame, "arm/segmented_frame", sensor_qos("reliable", depth=2))
         self.pub_overlay = self.create_publisher(Image, "arm/segmentation/overlay", qos)
         self.pub_cloud = self.create_publisher(PointCloud2, "arm/segmentation/points", qos)
         self.pub_diag = self.create_publisher(DiagnosticArray, "diagnostics", 10)
