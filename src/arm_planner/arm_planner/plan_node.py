@@ -52,6 +52,10 @@ from arm_ros.executors import QueueAwareMultiThreadedExecutor
 DRY_RUN_VALID_S = 60.0  # a dry run's plan may be executed this long after it was made
 DRY_RUN_JOINT_TOLERANCE_RAD = 0.01  # ... with every arm joint still this near where it started
 DRY_RUN_GRIPPER_TOLERANCE_M = 0.002
+# A client that takes its target from the /arm/meshes array it has just received may send the goal
+# before that array reached this node: a goal stamped newer than every held array waits this long
+# (wall clock) for it.
+MESHES_ARRIVAL_WAIT_S = 2.0
 
 
 @dataclass
@@ -176,8 +180,14 @@ class PlanNode(Node):
     def _goal_scene(self, goal) -> tuple[Scene | None, str]:
         """The meshes the goal's target id refers to, or why there are none."""
         stamp_ns = time_ns(goal.meshes_stamp)
-        with self._lock:
-            scene, held = self._scenes.stamped(stamp_ns), self._scenes.stamps_ns()
+        deadline = time.monotonic() + MESHES_ARRIVAL_WAIT_S
+        while True:
+            with self._lock:
+                scene, held = self._scenes.stamped(stamp_ns), self._scenes.stamps_ns()
+            in_flight = stamp_ns > max(held, default=-1)
+            if scene is not None or not in_flight or time.monotonic() >= deadline:
+                break
+            time.sleep(0.02)
         if scene is not None:
             return scene, ""
         if not held:

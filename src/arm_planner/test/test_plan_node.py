@@ -254,3 +254,19 @@ def test_goal_plans_on_the_meshes_its_stamp_names(graph):
     assert "unknown target id 4" in _send(action, Manipulate.Goal.TASK_GRASP, 4).message  # latest: stamp 101
     result = _send(action, Manipulate.Goal.TASK_GRASP, 4, meshes_stamp_s=99)
     assert "no /arm/meshes array stamped 99000000000 ns" in result.message
+
+
+def test_goal_for_an_array_still_in_flight_waits_for_it(graph):
+    """A client that picked its target from an array this node has not received yet is served once
+    the array arrives (within plan_node.MESHES_ARRIVAL_WAIT_S), not refused."""
+    node, client, action, _ = graph
+    goal = Manipulate.Goal(task=Manipulate.Goal.TASK_PUSH, target_id=9)
+    goal.meshes_stamp.sec = 200
+    goal.goal_displacement.x, goal.goal_displacement.y = 0.05, -0.3
+    handle = _wait(action.send_goal_async(goal))
+    assert handle.accepted
+    result_future = handle.get_result_async()
+    time.sleep(0.3)  # the goal is waiting; now the array it names arrives
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04], object_id=9, stamp_s=200)
+    result = _wait(result_future).result
+    assert len(result.trajectory.points) == 5, result.message
