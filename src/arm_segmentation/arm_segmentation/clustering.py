@@ -23,6 +23,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from arm_core.boxes import mask_box
 from arm_core.settings import setting
 from arm_segmentation.label_stats import label_maximum, label_minimum
 
@@ -168,6 +169,11 @@ def fragment_contacts(labels: np.ndarray, depth_m: np.ndarray, params: ClusterPa
     outline probability of the contacts (the larger of the two pixels' in the HxW float `outline`
     from the boundary network; zero when it is None).
     """
+    box = mask_box(labels > 0)  # both pixels of a contact are labelled: it lies inside
+    if box is not None:
+        labels, depth_m = labels[box], depth_m[box]
+        smooth = None if smooth is None else smooth[box]
+        outline = None if outline is None else outline[box]
     keys, kinds, smooth_kinds, outline_sums = [], [], [], []
     r = params.contact_radius_px
     shifts = [(0, k) for k in range(1, r + 1)] + [(k, 0) for k in range(1, r + 1)]
@@ -208,9 +214,13 @@ def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: 
     that label's mean, so a region without a seed of its own is not swallowed by a neighbour.
     """
     n = int(labels.max())
-    out = labels.astype(np.uint16 if n < 65535 else np.float32)
+    full = labels.astype(np.uint16 if n < 65535 else np.float32)
     means = _region_means(labels, n, chroma)
-    todo = mask & (out == 0)
+    todo = mask & (full == 0)
+    box = mask_box(todo, 1)  # every neighbour of a pixel to fill lies in it
+    if box is None:
+        return full.astype(np.int64)
+    out, todo, chroma = full[box], todo[box], chroma[box]  # out: a view, written through
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(iterations):
         grown = cv2.dilate(out, kernel)
@@ -223,7 +233,7 @@ def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: 
             break
         out[gy[ok], gx[ok]] = owner[ok]
         todo[gy[ok], gx[ok]] = False
-    return out.astype(np.int64)
+    return full.astype(np.int64)
 
 
 def _union(n: int, pairs: np.ndarray) -> np.ndarray:

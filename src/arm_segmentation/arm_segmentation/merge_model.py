@@ -158,7 +158,8 @@ class LearnedMerge:
         flat = labels.ravel()
         self.size = np.bincount(flat, minlength=n + 1).astype(np.float64)
         columns = self.stats.reshape(-1, self.stats.shape[-1])
-        self.sums = _sums_by(flat, columns, n + 1)
+        labelled = flat > 0  # region pairs never include the background (0): its sums stay 0
+        self.sums = _sums_by(flat[labelled], columns[labelled], n + 1)
         height = self.height_m.ravel()
         known = np.isfinite(height)
         self.low = np.full(n + 1, np.inf)
