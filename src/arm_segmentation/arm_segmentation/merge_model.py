@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from arm_segmentation.clustering import hue_distance, widest_disc_m
+from arm_segmentation.clustering import channel_mean, hue_distance, widest_disc_m
 from arm_segmentation.perceptron import Perceptron, shared_perceptron
 
 CHECKPOINT_DIR = pathlib.Path(__file__).resolve().parent / "checkpoints"
@@ -58,7 +58,7 @@ def pixel_statistics(chroma, rgb, normals_camera, area_m2) -> np.ndarray:
     square (3), brightness (0-1), the unit normal in the camera frame (3; 0 = none), the pixel's
     surface area (m^2; 0 where it is no object evidence)."""
     chroma = np.asarray(chroma, dtype=np.float64)
-    brightness = np.asarray(rgb, dtype=np.float64).mean(axis=-1, keepdims=True) / 255.0
+    brightness = channel_mean(np.asarray(rgb, dtype=np.float64))[..., None] / 255.0
     return np.concatenate(
         [chroma, chroma**2, brightness, np.asarray(normals_camera, np.float64), np.asarray(area_m2)[..., None]], -1
     )

@@ -1,8 +1,9 @@
 """Pixels without depth on the objects' outlines and in their notches (fill_enclosed_missing)."""
 
 import numpy as np
+from scipy import ndimage
 
-from arm_segmentation.segmentation import fill_enclosed_missing
+from arm_segmentation.segmentation import fill_enclosed_missing, fill_holes
 
 
 def _notched_square():
@@ -39,3 +40,10 @@ def test_enclosed_hole_goes_to_the_surrounding_instance():
     depth[15:20, 8:14] = 0.0
     filled = fill_enclosed_missing(labels, depth)
     assert np.all(filled[15:20, 8:14] == 1)
+
+
+def test_fill_holes_matches_scipy_binary_fill_holes():
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        mask = rng.random((int(rng.integers(1, 60)), int(rng.integers(1, 80)))) < rng.uniform(0.2, 0.9)
+        assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask))
