@@ -10,11 +10,14 @@ meshes fitted to a new depth frame; see arm_benchmarks.world_execution), or open
 with --observe-period 0. Success: grasp lifts the target >= 5 cm; push moves it
 30 cm right and 5 cm forward, rearrange 20 cm forward and 20 cm left, each ending within 2.5 cm.
 
-Robust success: each plan (the controls the robot executed) is executed again, open loop, in
---robust-worlds perturbed copies of the ground-truth world (arm_benchmarks.world_perturbation: objects
-moved by up to 5 mm and turned by up to 5 degrees, friction x0.5-1.5, masses x0.7-1.3, 0-40 ms of
-latency, joints off by up to 0.5 degrees; the same draws for every method of an episode); the robust
-success is the share of those executions that meet the task (a goal without a plan fails in all).
+Robust success: each method's plan is executed again, as in the nominal world, in --robust-worlds
+perturbed copies of the ground-truth world (arm_benchmarks.world_perturbation: objects moved by up to
+5 mm and turned by up to 5 degrees, friction x0.5-1.5, masses x0.7-1.3, 0-40 ms of latency, joints off
+by up to 0.5 degrees; the same draws for every method of an episode). Closed loop, the planner plans
+again from the method's own twin of the view (the perturbation unknown to it) and observes the perturbed
+world every --observe-period, its encoders reporting the joints off by the draw's offsets; open loop
+(--observe-period 0), the nominal plan's controls are replayed. The robust success is the share of those
+executions that meet the task (a goal without a plan fails in all).
 
 Results are appended per (episode, method) to episodes.jsonl, so an interrupted run resumes. Each row
 carries the run key (arm_benchmarks.run_key: a digest of the settings, the methods' checkpoints and the source
@@ -234,7 +237,22 @@ def run_method(
         if session.twin is not None:
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
         if outcome.planned and robust_worlds > 0:
-            row["robust"] = robust_executions(scene, target_index, task, outcome.result, robust_worlds, seed)
+            if period_steps > 0:
+                row["robust"] = closed_loop_robust(
+                    objects,
+                    scene,
+                    target_index,
+                    frame,
+                    task,
+                    config,
+                    twin_timestep_s,
+                    period_steps,
+                    tracker,
+                    robust_worlds,
+                    seed,
+                )
+            else:
+                row["robust"] = replayed_robust(scene, target_index, task, outcome.result, robust_worlds, seed)
     finally:
         session.close()
         world.close()
@@ -245,12 +263,47 @@ def run_method(
     return row | {"success": bool(run.success), "error_m": run.error_m, "seconds": time.perf_counter() - started}
 
 
-def robust_executions(scene, target_index: int, task: str, result, worlds: int, seed: int) -> list[bool]:
-    """Whether the plan's controls meet the task in each of `worlds` perturbed worlds (draws seeded by
-    the episode, so every method meets the same worlds)."""
+def perturbation_draws(scene, worlds: int, seed: int):
+    """The episode's perturbed worlds' draws (seeded by the episode: every method meets the same worlds)."""
+    return [
+        draw(WorldPerturbation(), len(scene.objects), np.random.default_rng([seed, 7919, k])) for k in range(worlds)
+    ]
+
+
+def closed_loop_robust(
+    objects, scene, target_index, frame, task, config, twin_timestep_s, period_steps, tracker, worlds: int, seed: int
+) -> list[bool]:
+    """Whether the method, planning again from its own twin of the view and executing closed loop,
+    meets the task in each of `worlds` perturbed worlds."""
     met = []
-    for k in range(worlds):
-        sample = draw(WorldPerturbation(), len(scene.objects), np.random.default_rng([seed, 7919, k]))
+    for sample in perturbation_draws(scene, worlds, seed):
+        session = ManipulationSession(config, twin_timestep_s)
+        world = perturbed_world(scene, sample)
+        try:
+            run = run_in_world(
+                session,
+                world,
+                objects,
+                scene.table_height_m,
+                target_index,
+                task,
+                GOALS[task],
+                TOLERANCE_M,
+                period_steps,
+                reobservation(tracker, objects, frame, seed),
+                sample,
+            )
+            met.append(bool(run.outcome.planned and run.success))
+        finally:
+            session.close()
+            world.close()
+    return met
+
+
+def replayed_robust(scene, target_index: int, task: str, result, worlds: int, seed: int) -> list[bool]:
+    """Whether the plan's controls, replayed open loop, meet the task in each of `worlds` perturbed worlds."""
+    met = []
+    for sample in perturbation_draws(scene, worlds, seed):
         world = perturbed_world(scene, sample)
         try:
             body = world.object_ids[target_index]

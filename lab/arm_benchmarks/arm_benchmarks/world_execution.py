@@ -7,7 +7,9 @@ positions and velocities, and each object's pose from a perfect tracker (the obj
 motion since the view, applied to the method's own mesh; shapes stay the method's reconstruction),
 or, with a `Reobservation`, from a new depth frame of the world through the first view's camera
 (depth_tracking: the method's mesh fitted to the object's pixels; an object out of view keeps the
-twin's prediction). Same step budget as open loop.
+twin's prediction). Same step budget as open loop. In a perturbed world (world_perturbation) the
+robot's servos hold each command the draw's latency late and off by its joint offsets, and its
+encoders report the joints off by the same offsets (what the robot believes it commanded).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import mujoco
 import numpy as np
 
 from arm_benchmarks.depth_tracking import DepthTracker, rotation_vector
+from arm_benchmarks.world_perturbation import PerturbedDraw
 from arm_planner.session import ManipulationSession, Outcome
 from arm_planner.tasks import GRASP_LIFT_M, TASK_GRASP
 from arm_planner.twin import TwinObject
@@ -66,12 +69,24 @@ def tracked_pose(T_view_true: np.ndarray, T_now_true: np.ndarray, T_view_method:
 
 class WorldSync:
     """Planner `observe` hook: executes each control step in the world and, every `period_steps`,
-    writes the world's robot state and tracked object poses and velocities into the twin."""
+    writes the world's robot state and tracked object poses and velocities into the twin. With a
+    `perturbation`, the world's robot is late and off as the draw says."""
 
     def __init__(
-        self, session: ManipulationSession, world, objects: list[TwinObject], period_steps: int, reobserve=None
+        self,
+        session: ManipulationSession,
+        world,
+        objects: list[TwinObject],
+        period_steps: int,
+        reobserve=None,
+        perturbation: PerturbedDraw | None = None,
     ):
         self.session, self.world, self.period = session, world, int(period_steps)
+        self.perturbation = perturbation
+        arm = len(robot.JOINT_NAMES)
+        self._commands = [world.data.ctrl[: arm + 1].copy()]  # planned commands, the one held at the start first
+        if perturbation is not None:
+            self._commands[0][:arm] -= perturbation.joint_offsets_rad
         self.reobserve: Reobservation | None = reobserve
         self._last_fit: dict[int, tuple[float, np.ndarray]] = {}
         self.control_dt_s = session.config.mppi.control_dt_s
@@ -80,6 +95,27 @@ class WorldSync:
         self.joint_names = tuple(robot.JOINT_NAMES) + tuple(robot.FINGER_JOINT_NAMES)
         self.actuators = None
         self.observations = 0
+
+    def _servo_command(self, step: int, command: np.ndarray) -> np.ndarray:
+        """What the world's servos hold at the end of control step `step` for the planned `command`
+        (7 joints + finger): unperturbed, the command itself; perturbed, the planned commands
+        interpolated `latency_s` earlier, the arm joints off by their offsets."""
+        self._commands.append(np.asarray(command, dtype=np.float64).copy())
+        if self.perturbation is None:
+            return self._commands[-1]
+        at = max(step + 1 - self.perturbation.latency_s / self.control_dt_s, 0.0)  # index into _commands
+        below = int(np.floor(at))
+        above = min(below + 1, len(self._commands) - 1)
+        held = self._commands[below] + (at - below) * (self._commands[above] - self._commands[below])
+        held[: len(robot.JOINT_NAMES)] += self.perturbation.joint_offsets_rad
+        return held
+
+    def _encoder_offsets(self) -> np.ndarray:
+        """Per robot joint, what the encoders report minus the truth (rad; 0 for the finger)."""
+        offsets = np.zeros(len(self.joint_names))
+        if self.perturbation is not None:
+            offsets[: len(robot.JOINT_NAMES)] = -self.perturbation.joint_offsets_rad
+        return offsets
 
     @staticmethod
     def _free_joint(model, name: str) -> tuple[int, int]:
@@ -134,13 +170,13 @@ class WorldSync:
     def __call__(self, step: int, control: np.ndarray, model, data) -> bool:
         if self.actuators is None:
             self.actuators = self.session.planner.robot.actuators
-        self.world.execute(np.array([self.control_dt_s]), control[self.actuators][None])
+        self.world.execute(np.array([self.control_dt_s]), self._servo_command(step, control[self.actuators])[None])
         if (step + 1) % self.period:
             return False
         w = self.world
-        for name in self.joint_names:
+        for name, offset in zip(self.joint_names, self._encoder_offsets(), strict=True):
             twin_joint, world_joint = model.joint(name), w.model.joint(name)
-            data.qpos[twin_joint.qposadr[0]] = w.data.qpos[world_joint.qposadr[0]]
+            data.qpos[twin_joint.qposadr[0]] = w.data.qpos[world_joint.qposadr[0]] + offset
             data.qvel[twin_joint.dofadr[0]] = w.data.qvel[world_joint.dofadr[0]]
         if self.reobserve is not None:
             self._reobserve(model, data)
@@ -166,14 +202,18 @@ def run_in_world(
     tolerance_m: float,
     period_steps: int = 0,
     reobserve: Reobservation | None = None,
+    perturbation: PerturbedDraw | None = None,
 ) -> WorldRun:
     """Plan on `objects` and execute in `world` (a SimWorld of the true scene, robot at home);
     period_steps 0 = open loop; reobserve: object poses from new frames instead of the perfect
-    tracker (closed loop only). Object id n is the world's object n - 1."""
+    tracker (closed loop only); perturbation: the world's robot late and off as drawn (closed loop
+    only). Object id n is the world's object n - 1."""
     body = world.object_ids[target_index]
     start = world.data.xipos[body].copy()
     session.set_objects(objects, table_height_m)
-    sync = WorldSync(session, world, objects, period_steps, reobserve) if period_steps > 0 else None
+    if perturbation is not None and period_steps <= 0:
+        raise ValueError("a perturbed robot runs closed loop here; open loop, use world_perturbation.execute_perturbed")
+    sync = WorldSync(session, world, objects, period_steps, reobserve, perturbation) if period_steps > 0 else None
     outcome = session.request(
         task,
         target_index + 1,

@@ -10,7 +10,8 @@ from test_depth_tracking import _pose
 from arm_benchmarks.bench_manip import ground_truth_objects
 from arm_benchmarks.depth_tracking import DepthTracker
 from arm_benchmarks.perturbed_runs import perturbed_scene
-from arm_benchmarks.world_execution import Reobservation, run_in_world, tracked_pose
+from arm_benchmarks.world_execution import Reobservation, WorldSync, run_in_world, tracked_pose
+from arm_benchmarks.world_perturbation import PerturbedDraw
 from arm_core.camera import look_at
 from arm_core.majority import holds_in_most
 from arm_planner.mppi import MppiConfig
@@ -18,6 +19,7 @@ from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
 from arm_planner.tasks.push import CagePushReward, PushReward
 from arm_planner.twin import decompose
+from arm_sim import robot
 from arm_sim.objects import ObjectModel, make_object
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import SimWorld
@@ -208,3 +210,27 @@ def test_a_u_open_towards_the_finger_is_pushed_by_its_base():
 
     held, outcomes = holds_in_most(attempt)
     assert held, outcomes
+
+
+def test_a_perturbed_robot_holds_each_command_late_and_off_and_its_encoders_report_the_offset():
+    world = SimWorld(_box_scene(), robot_arm=True)
+    session = ManipulationSession(_config(0), 0.01)
+    dt = session.config.mppi.control_dt_s
+    offsets = np.linspace(-0.008, 0.008, 7)
+    late = PerturbedDraw(np.zeros((1, 2)), np.zeros(1), np.ones(1), np.ones(1), 1.5 * dt, offsets)
+    world.set_robot_state(robot.HOME_Q + offsets, robot.GRIPPER_OPEN_M)  # as perturbed_world leaves it
+    sync = WorldSync(session, world, ground_truth_objects(world.scene), 5, perturbation=late)
+    home = np.append(robot.HOME_Q, robot.GRIPPER_OPEN_M)
+    planned = [home + 0.1 * (k + 1) for k in range(3)]
+    held = [sync._servo_command(step, command) for step, command in enumerate(planned)]
+    arm_offsets = np.append(offsets, 0.0)
+    assert np.allclose(held[0], home + arm_offsets), "1.5 steps late: the start is still held"
+    assert np.allclose(held[1], (home + planned[0]) / 2 + arm_offsets)
+    assert np.allclose(held[2], (planned[0] + planned[1]) / 2 + arm_offsets)
+    assert np.allclose(sync._encoder_offsets(), np.append(-offsets, [0.0, 0.0]))
+    with pytest.raises(ValueError, match="closed loop"):
+        run_in_world(
+            session, world, ground_truth_objects(world.scene), 0.0, 0, "grasp", (0, 0, 0), 0.025, 0, None, late
+        )
+    session.close()
+    world.close()
