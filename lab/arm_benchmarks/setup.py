@@ -29,6 +29,7 @@ setup(
             "bench_real = arm_benchmarks.bench_real:main",
             "bench_demo = arm_benchmarks.bench_demo:main",
             "bench_pushability = arm_benchmarks.pushability:main",
+            "bench_behaviours = arm_benchmarks.bench_behaviours:main",
         ]
     },
 )
