@@ -2,7 +2,7 @@ SHELL := /bin/bash
 ENV := source scripts/env.sh
 ARGS ?=
 
-.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose bench-real bench-demo clean
+.PHONY: setup demo test lint bench-perf bench-seg bench-recon bench-manip bench-robustness bench-camera-pose bench-real bench-demo bench-behaviours clean
 
 setup:
 	@scripts/bootstrap.sh
@@ -40,6 +40,9 @@ bench-real: setup
 
 bench-demo: setup
 	@$(ENV) && bench_demo $(ARGS)
+
+bench-behaviours: setup
+	@$(ENV) && bench_behaviours $(ARGS)
 
 clean:
 	rm -rf build install log

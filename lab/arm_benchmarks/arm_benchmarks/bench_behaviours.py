@@ -1,13 +1,13 @@
 """bench_behaviours: how often each physical behaviour the test suite asserts holds.
 
 The suite asserts a physical outcome (a grasp lifts the lamp upright, a pushed cylinder arrives
-standing, ...) with arm_core.majority.holds_in_most: in 2 of 3 runs whose initial states differ by far
+standing, ...) with arm_core.repeated_runs.holds_repeatedly: in 2 of 3 runs whose initial states differ by far
 less than a real robot's uncertainty (objects moved by up to 1e-5 m and 1e-4 rad, MPPI seeded
 differently). This benchmark runs the same tests with every behaviour tried --runs times (no early
 stop) and reports, per behaviour, the share of runs in which it held and the chance that the suite's
 2-of-3 rule fails on a machine whose rounding draws other runs (from that share, runs independent).
 
-    bench_behaviours [--runs 10] [--out results/behaviours] [TEST_FILE ...]
+    bench_behaviours [--runs 10] [--out results/behaviours] [-k EXPRESSION] [TEST_FILE ...]
 
 Run from the repository root (the test files are read from the source tree). Writes summary.json and
 report.md; each finished test is appended to runs.jsonl, so an interrupted run resumes.
@@ -22,28 +22,31 @@ import pathlib
 import time
 from math import comb
 
+import numpy as np
 import pytest
 
-import arm_core.majority
+import arm_core.repeated_runs
 from arm_benchmarks.stats import json_safe, wilson_interval
 
 DEFAULT_TESTS = ("src/arm_planner/test/test_planner.py", "lab/arm_benchmarks/test/test_world_execution.py")
 
 
-def suite_failure_chance(p_hold: float, runs: int = arm_core.majority.RUNS, majority: int = arm_core.majority.MAJORITY):
-    """Chance that fewer than `majority` of `runs` independent runs hold, each holding with p_hold."""
-    return sum(comb(runs, k) * p_hold**k * (1 - p_hold) ** (runs - k) for k in range(majority))
+def suite_failure_chance(
+    p_hold: float, runs: int = arm_core.repeated_runs.RUNS, needed: int = arm_core.repeated_runs.NEEDED
+):
+    """Chance that fewer than `needed` of `runs` independent runs hold, each holding with p_hold."""
+    return sum(comb(runs, k) * p_hold**k * (1 - p_hold) ** (runs - k) for k in range(needed))
 
 
 class BehaviourRecorder:
-    """pytest plugin: replaces holds_in_most by one that makes every run and records the outcomes of
+    """pytest plugin: replaces holds_repeatedly by one that makes every run and records the outcomes of
     each test (several behaviours in one test are numbered)."""
 
     def __init__(self, runs: int, log: pathlib.Path, done: set[str]):
         self.runs, self.log, self.done = runs, log, done
         self.outcomes: dict[str, list[bool]] = {}
 
-    def _record(self, attempt, runs: int = arm_core.majority.RUNS, majority: int = arm_core.majority.MAJORITY):
+    def _record(self, attempt, runs: int = arm_core.repeated_runs.RUNS, needed: int = arm_core.repeated_runs.NEEDED):
         test = os.environ.get("PYTEST_CURRENT_TEST", "?").rsplit(" ", 1)[0]
         name = test
         k = 1
@@ -54,17 +57,22 @@ class BehaviourRecorder:
         outcomes = [attempt(run) for run in range(self.runs)]
         held = [bool(ok) for ok, _ in outcomes]
         self.outcomes[name] = held
-        row = {"behaviour": name, "held": held, "seconds": round(time.perf_counter() - started, 1)}
+        row = {
+            "behaviour": name,
+            "held": held,
+            "details": [repr(detail) for _, detail in outcomes],
+            "seconds": round(time.perf_counter() - started, 1),
+        }
         with self.log.open("a") as sink:
             sink.write(json.dumps(row) + "\n")
-        return sum(held) >= majority * self.runs / runs, outcomes
+        return sum(held) >= needed * self.runs / runs, outcomes
 
     def pytest_configure(self, config):
-        self._original = arm_core.majority.holds_in_most
-        arm_core.majority.holds_in_most = self._record
+        self._original = arm_core.repeated_runs.holds_repeatedly
+        arm_core.repeated_runs.holds_repeatedly = self._record
 
     def pytest_unconfigure(self, config):
-        arm_core.majority.holds_in_most = self._original
+        arm_core.repeated_runs.holds_repeatedly = self._original
 
     def pytest_collection_modifyitems(self, config, items):
         items[:] = [item for item in items if item.nodeid not in self.done]
@@ -84,7 +92,8 @@ def summarise(rows: list[dict], runs: int) -> dict:
             "suite_failure_chance": suite_failure_chance(rate),
             "seconds": row.get("seconds"),
         }
-    return {"runs_per_behaviour": runs, "behaviours": behaviours}
+    passes = [1.0 - b["suite_failure_chance"] for b in behaviours.values()]
+    return {"runs_per_behaviour": runs, "behaviours": behaviours, "any_failure_chance": 1.0 - float(np.prod(passes))}
 
 
 def write_report(summary: dict, path: pathlib.Path) -> None:
@@ -92,8 +101,9 @@ def write_report(summary: dict, path: pathlib.Path) -> None:
         "# Physical behaviours the test suite asserts: how often each holds",
         "",
         f"Each behaviour tried {summary['runs_per_behaviour']} times (run 0 as written; run k: objects moved by "
-        "up to 1e-5 m and turned by up to 1e-4 rad, MPPI seed k). The suite asserts 2 of 3; 'suite fails' is "
-        "the chance that 2 of 3 such runs do not hold, from the measured rate.",
+        "up to 1e-5 m and turned by up to 1e-4 rad, MPPI seed k). The suite asserts "
+        f"{arm_core.repeated_runs.NEEDED} of up to {arm_core.repeated_runs.RUNS} runs; 'suite fails' is the chance "
+        "that it does not, from the measured rate.",
         "",
         "| behaviour | held | rate (90 % interval) | suite fails |",
         "|---|---|---|---|",
@@ -104,6 +114,7 @@ def write_report(summary: dict, path: pathlib.Path) -> None:
             f"| `{name}` | {b['held']} / {b['runs']} | {b['hold_rate']:.2f} ({lo:.2f}-{hi:.2f}) | "
             f"{b['suite_failure_chance']:.3f} |"
         )
+    lines += ["", f"Chance that at least one of them fails on a machine: {summary['any_failure_chance']:.3f}."]
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -112,6 +123,7 @@ def main(argv=None) -> int:
     parser.add_argument("tests", nargs="*", default=list(DEFAULT_TESTS), help="test files (from the repository root)")
     parser.add_argument("--runs", type=int, default=10, help="runs of each behaviour")
     parser.add_argument("--out", default="results/behaviours")
+    parser.add_argument("-k", dest="keyword", default=None, help="only the tests pytest -k selects")
     parser.add_argument("--fresh", action="store_true", help="ignore earlier runs in --out")
     args = parser.parse_args(argv)
     missing = [t for t in args.tests if not pathlib.Path(t).is_file()]
@@ -128,7 +140,8 @@ def main(argv=None) -> int:
     rows = [r for r in rows if len(r["held"]) == args.runs]
     done = {r["behaviour"].split(" #")[0] for r in rows}
     recorder = BehaviourRecorder(args.runs, log, done)
-    code = pytest.main(["-q", "-p", "no:cacheprovider", *args.tests], plugins=[recorder])
+    selection = ["-k", args.keyword] if args.keyword else []
+    code = pytest.main(["-q", "-p", "no:cacheprovider", *selection, *args.tests], plugins=[recorder])
     rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
     rows = [r for r in rows if len(r["held"]) == args.runs]
     summary = summarise(rows, args.runs) | {"pytest_exit_code": int(code), "tests": args.tests}

@@ -1,7 +1,8 @@
 """Physical outcomes that hold on any CPU: a behaviour is asserted over a few runs whose initial states
 differ by far less than a real robot's uncertainty (objects moved by up to 1e-5 m and turned by up to
-1e-4 rad, MPPI seeded differently), and must hold in a majority of them. One contact-rich rollout can
-flip with the CPU's floating-point rounding; a behaviour that is robust holds across such runs."""
+1e-4 rad, MPPI seeded differently), and must hold in enough of them (arm_core.repeated_runs). One
+contact-rich rollout can flip with the CPU's floating-point rounding; a behaviour that is robust holds
+across such runs, and bench_behaviours measures how often each does."""
 
 import numpy as np
 

@@ -13,7 +13,7 @@ from arm_benchmarks.perturbed_runs import perturbed_scene
 from arm_benchmarks.world_execution import Reobservation, WorldSync, run_in_world, tracked_pose
 from arm_benchmarks.world_perturbation import PerturbedDraw
 from arm_core.camera import look_at
-from arm_core.majority import holds_in_most
+from arm_core.repeated_runs import holds_repeatedly
 from arm_planner.mppi import MppiConfig
 from arm_planner.planner import PlannerConfig
 from arm_planner.session import ManipulationSession
@@ -82,7 +82,7 @@ def test_closed_loop_grasp_runs_in_the_world_and_the_twin_tracks_it():
             ok = outcome.success and outcome.error_m == 0.0 and outcome.observations == steps // 5
             return ok and _twin_lift_gap_m(session, world) < 0.01, outcome.outcome.message
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -97,7 +97,7 @@ def test_closed_loop_from_new_frames_lifts_the_box_and_the_twin_follows_it():
             ok = outcome.success and counted and moving and _twin_lift_gap_m(session, world) < 0.01
             return ok, (outcome.outcome.message, reobserve.fitted, reobserve.kept, outcome.observations)
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -115,7 +115,7 @@ def test_a_top_heavy_object_pushed_in_the_cage_arrives_standing(category):
             # standing: leaning at most on the front finger
             return outcome.success and _tilt_deg(world) < 30.0, (outcome.error_m, _tilt_deg(world))
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -135,7 +135,7 @@ def test_a_top_heavy_t_is_pushed_caged_between_the_fingers_and_arrives_standing(
             narrowed = pushing.any() and np.all(opening[pushing] < opening[~pushing].min())
             return outcome.success and _tilt_deg(world) < 30.0 and narrowed, (outcome.error_m, _tilt_deg(world))
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -156,7 +156,7 @@ def test_a_torus_is_grasped_by_its_tube_and_lifted():
             assert reward.grasp_site_moved and 0.05 < np.linalg.norm(reward.grasp_offset[:2]) < 0.1
             return outcome.success, (outcome.error_m, outcome.outcome.message)
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -171,23 +171,25 @@ def test_a_box_wider_than_the_open_fingers_is_rearranged_by_pushing_it():
             steps = len(outcome.outcome.result.times_s)
             return outcome.success and steps > budgets["rearrange_steps"], (outcome.error_m, steps)
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
 def test_a_tall_cylinder_is_pushed_by_one_finger_and_arrives_standing():
     """16 cm tall, 6 cm across: too tall for the cage. Coming from the robot's side to the contact point
     behind it, the hand once swept its fingers and palm through the cylinder's top and toppled it; now
-    it passes above the top, comes down behind it and pushes with the palm's narrow side to it."""
+    it passes above the top, comes down behind it and pushes with the palm's narrow side to it. Pushed
+    at the default 0.2 m/s it arrives standing in 5 of 10 runs (it tips when it slides ahead of the hand
+    and the table's friction stops its base); at 0.1 m/s in 8 of 10 (bench_behaviours)."""
     scene = _external(trimesh.creation.cylinder(radius=0.03, height=0.16), "tall_cylinder")
 
     def attempt(run):
-        with world_run(scene, run, "push", (0.05, -0.3, 0.0)) as (session, world, outcome, _):
+        with world_run(scene, run, "push", (0.05, -0.3, 0.0), push_hand_speed_m_s=0.1) as (session, world, outcome, _):
             reward = session.planner._last_reward
             assert isinstance(reward, PushReward) and not isinstance(reward, CagePushReward)
             return outcome.success and _tilt_deg(world) < 20.0, (outcome.error_m, _tilt_deg(world))
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
@@ -208,7 +210,7 @@ def test_a_u_open_towards_the_finger_is_pushed_by_its_base():
             assert isinstance(reward, PushReward) and not isinstance(reward, CagePushReward)
             return outcome.success, (outcome.error_m, outcome.outcome.message)
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 from gantry import GANTRY_SPEC, gantry_model
 
-from arm_core.majority import holds_in_most
+from arm_core.repeated_runs import holds_repeatedly
 from arm_planner.mppi import MppiConfig, get_state
 from arm_planner.planner import Planner, PlannerConfig, PlanRequest
 from arm_planner.tasks.base import TargetGeometry
@@ -37,19 +37,20 @@ def _setup(steps=200, seed=0):
 def test_gantry_plans_meet_each_task_in_simulation_for_most_noise_seeds(task, displacement):
     # MPPI is chaotic: a change that moves a rollout by a micrometre can flip one seed's outcome near
     # the tolerance, so the claim is about most seeds, each plan checked in full.
-    met = []
-    for seed in (0, 1, 2):
+    def attempt(seed):
         planner, state, geometry = _setup(seed=seed)
         result = planner.plan(state, PlanRequest(task, "object_0", np.array(displacement, float)), geometry)
         planner.close()
-        met.append(result.success)
         assert result.joint_positions.shape == (len(result.times_s), 5)
         assert np.all(np.diff(result.times_s) > 0)
         if task != "push" and result.success:
             order = [s for i, s in enumerate(result.states) if i == 0 or result.states[i - 1] != s]
             assert order == ["ungrasped", "grasping", "grasped"]
             assert result.states.count("grasping") == planner.config.close_steps
-    assert sum(met) >= 2, met
+        return result.success, result.message
+
+    held, outcomes = holds_repeatedly(attempt)
+    assert held, outcomes
 
 
 def test_plan_respects_actuator_ranges_and_rates():
@@ -78,7 +79,7 @@ def test_push_with_a_hand_speed_cap_meets_the_goal_with_the_hand_no_faster_than_
         assert pushing.sum() == 0 or speed[pushing].max() <= cap * 1.05
         return result.success and pushing.sum() > 50, result.message
 
-    held, outcomes = holds_in_most(attempt)
+    held, outcomes = holds_repeatedly(attempt)
     assert held, outcomes
 
 
