@@ -4,6 +4,7 @@ Each package contributes a `perf.measure() -> dict` (arm_sim's own is render_fps
 are not installed are skipped and said so."""
 
 import argparse
+import faulthandler
 import importlib
 import json
 import os
@@ -34,6 +35,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="results/perf", help="output folder")
     parser.add_argument("--only", nargs="*", default=None, help="module names to run (default: all)")
     args = parser.parse_args(argv)
+    faulthandler.enable()  # a crash in native code leaves the Python stacks of every thread
     out = pathlib.Path(args.out)
     figures = {
         "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, python {platform.python_version()}",

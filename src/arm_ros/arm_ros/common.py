@@ -1,6 +1,7 @@
 """Node plumbing shared by every ARM node: QoS profiles, declared parameters, rate-limited error
 logs, diagnostics and a clean main loop. Imports rclpy: node modules only, never the cores."""
 
+import faulthandler
 import os
 import random
 import re
@@ -155,7 +156,9 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     parameter value or type (rclpy's
     ParameterException, raised by declare_parameter on a range or type violation) exits the process
     with code 2 and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
-    or take in flight end the process cleanly (exit code 0)."""
+    or take in flight end the process cleanly (exit code 0). A fatal signal (a crash in native code)
+    writes every thread's Python stack to stderr, the node's log, before the process dies."""
+    faulthandler.enable()
     rclpy.init(args=args)
     node = None
     code = 0
