@@ -20,6 +20,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
+from arm_core.coacd_import import import_coacd
 from arm_core.settings import setting
 
 from .meshing import from_manifold, to_manifold
@@ -165,8 +166,7 @@ def _plane_decomposition(solid: manifold3d.Manifold, settings: DecompositionSett
 def _coacd_decomposition(mesh: trimesh.Trimesh, settings: DecompositionSettings) -> list[np.ndarray]:
     # Imported here: CoACD is an optional backend (not the default 'planes') and its import takes
     # ~0.1 s (python -X importtime), which every reconstruction_node start would pay.
-    import coacd
-
+    coacd = import_coacd()
     coacd.set_log_level("error")
     parts = coacd.run_coacd(
         coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),

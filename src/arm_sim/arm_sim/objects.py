@@ -11,9 +11,10 @@ import pathlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import coacd
 import numpy as np
 import trimesh
+
+from arm_core.coacd_import import import_coacd
 
 NOMINAL_EXTENT_M = 0.08
 MESH_SUFFIXES = (".obj", ".stl", ".ply")
@@ -277,6 +278,7 @@ def decompose_cached(mesh: trimesh.Trimesh, max_parts: int = 12) -> list[trimesh
     if cache.exists():
         data = np.load(cache)
         return [_hull(data[k]) for k in sorted(data.files)]
+    coacd = import_coacd()
     coacd.set_log_level("error")
     result = coacd.run_coacd(
         coacd.Mesh(mesh.vertices, mesh.faces), threshold=0.08, max_convex_hull=max_parts, preprocess_resolution=30
