@@ -174,6 +174,23 @@ def reobservation(tracker: str, objects: list[TwinObject], frame, seed: int) -> 
     return Reobservation(frame.T_world_camera, tracker, DepthNoise(), np.random.default_rng(seed))
 
 
+def run_task(session, world, objects, scene, target_index, task, period_steps, reobserve, perturbation=None):
+    """The episode's task planned on `objects` and executed in `world` (world_execution.run_in_world)."""
+    return run_in_world(
+        session,
+        world,
+        objects,
+        scene.table_height_m,
+        target_index,
+        task,
+        GOALS[task],
+        TOLERANCE_M,
+        period_steps,
+        reobserve,
+        perturbation,
+    )
+
+
 def run_method(
     method,
     scene,
@@ -204,18 +221,7 @@ def run_method(
     session = ManipulationSession(config, twin_timestep_s)
     world = SimWorld(scene, robot_arm=True)
     try:
-        run = run_in_world(
-            session,
-            world,
-            objects,
-            scene.table_height_m,
-            target_index,
-            task,
-            GOALS[task],
-            TOLERANCE_M,
-            period_steps,
-            reobserve,
-        )
+        run = run_task(session, world, objects, scene, target_index, task, period_steps, reobserve)
         outcome = run.outcome
         row.update(
             predicted_success=bool(outcome.success),
@@ -280,19 +286,8 @@ def closed_loop_robust(
         session = ManipulationSession(config, twin_timestep_s)
         world = perturbed_world(scene, sample)
         try:
-            run = run_in_world(
-                session,
-                world,
-                objects,
-                scene.table_height_m,
-                target_index,
-                task,
-                GOALS[task],
-                TOLERANCE_M,
-                period_steps,
-                reobservation(tracker, objects, frame, seed),
-                sample,
-            )
+            reobserve = reobservation(tracker, objects, frame, seed)
+            run = run_task(session, world, objects, scene, target_index, task, period_steps, reobserve, sample)
             met.append(bool(run.outcome.planned and run.success))
         finally:
             session.close()
