@@ -31,6 +31,7 @@ ROSDEP_KEYS = {  # Python module -> rosdep key
     "manifold3d": "python3-manifold3d-pip",
     "rosbags": "python3-rosbags-pip",
     "setuptools": "python3-setuptools",
+    "pytest": "python3-pytest",
 }
 LOCAL_KEYS = ("python3-trimesh-pip", "python3-mujoco-pip", "python3-coacd-pip", "python3-manifold3d-pip",
               "python3-rosbags-pip")  # fmt: skip

@@ -20,8 +20,8 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from arm_core.coacd_import import import_coacd
 from arm_core.settings import setting
+from arm_sim.coacd_import import import_coacd
 
 from .meshing import from_manifold, to_manifold
 

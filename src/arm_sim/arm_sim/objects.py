@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
-from arm_core.coacd_import import import_coacd
+from arm_sim.coacd_import import import_coacd
 
 NOMINAL_EXTENT_M = 0.08
 MESH_SUFFIXES = (".obj", ".stl", ".ply")

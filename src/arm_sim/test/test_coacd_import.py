@@ -10,7 +10,7 @@ def _exit_code(code: str) -> int:
 
 def test_rclpy_imported_after_coacd_loaded_through_import_coacd_works():
     code = (
-        "from arm_core.coacd_import import import_coacd\n"
+        "from arm_sim.coacd_import import import_coacd\n"
         "import_coacd()\n"
         "import rclpy\n"
         "rclpy.init()\n"
