@@ -36,7 +36,8 @@ def _setup(steps=200, seed=0):
 )
 def test_gantry_plans_meet_each_task_in_simulation_for_most_noise_seeds(task, displacement):
     # MPPI is chaotic: a change that moves a rollout by a micrometre can flip one seed's outcome near
-    # the tolerance, so the claim is about most seeds, each plan checked in full.
+    # the tolerance, so the claim is about several noise seeds (arm_core.repeated_runs), each plan
+    # checked in full.
     def attempt(seed):
         planner, state, geometry = _setup(seed=seed)
         result = planner.plan(state, PlanRequest(task, "object_0", np.array(displacement, float)), geometry)
