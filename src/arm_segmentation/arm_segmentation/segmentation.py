@@ -79,7 +79,7 @@ class SegmentationParams:
 
     fill_radius_px: int = 1
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
-    rim_window_px: int = 9
+    rim_window_px: int = 41  # full-resolution pixels: wider than a projector's shadow beside a near object
     fill_enclosed_missing: bool = True
     fill_closed_missing_px: int = 6  # pixels without depth in this closing of the instances join them (0: off)
     smooth_sigma_m: float = 0.01
@@ -364,7 +364,8 @@ def segment_detailed(
     if maps is not None and (params.boundary.fill_objects or outline_classifier is not None):
         objectness = upsample_linear(maps[1], stride, depth_full.shape)
     if objectness is not None and params.boundary.fill_objects:
-        labels = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
+        grown = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
+        labels = trim_grown_missing(labels, grown, depth_full, rgb_full, params)
     if objectness is not None and outline_classifier is not None:
         labels = refine_outline(labels, rgb_full, depth_full, objectness, outline_classifier, params.outline)
     if exclude is not None and np.any(labels[exclude]):
@@ -449,6 +450,17 @@ def _trim_rim(labels, depth_m, rgb, close_px: int, window_px: int):
     out = labels.copy()
     out[ys[drop], xs[drop]] = 0
     return out
+
+
+def trim_grown_missing(labels, grown, depth_m, rgb, params: SegmentationParams) -> np.ndarray:
+    """grown (labels after a growth step), without the added pixels lacking depth that
+    trim_missing_rim gives to the background: the object network cannot tell a structured-light
+    projector's shadow on the surface behind an object's edge from the object, the colour can."""
+    added = (labels == 0) & (grown > 0) & (depth_m <= 0)
+    if not np.any(added):
+        return grown
+    trimmed = trim_missing_rim(grown, depth_m, rgb, params.missing_rim_close_px, params.rim_window_px)
+    return np.where(added, trimmed, grown)
 
 
 def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:

@@ -1,9 +1,10 @@
-"""Pixels without depth on the objects' outlines and in their notches (fill_enclosed_missing)."""
+"""Pixels without depth on the objects' outlines and in their notches (fill_enclosed_missing), and
+beside them (trim_grown_missing)."""
 
 import numpy as np
 from scipy import ndimage
 
-from arm_segmentation.segmentation import fill_enclosed_missing, fill_holes
+from arm_segmentation.segmentation import SegmentationParams, fill_enclosed_missing, fill_holes, trim_grown_missing
 
 
 def _notched_square():
@@ -47,3 +48,35 @@ def test_fill_holes_matches_scipy_binary_fill_holes():
     for _ in range(100):
         mask = rng.random((int(rng.integers(1, 60)), int(rng.integers(1, 80)))) < rng.uniform(0.2, 0.9)
         assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask))
+
+
+def _red_box_on_grey_table_with_a_band_without_depth(band_rgb):
+    """A red 20x20 instance on a grey table, a 12 px band without depth left of it coloured band_rgb,
+    and the labels after a growth that gave the band to the box."""
+    rgb = np.full((60, 80, 3), 120, dtype=np.uint8)
+    rgb[20:40, 40:60] = (200, 30, 30)
+    rgb[20:40, 28:40] = band_rgb
+    depth = np.ones((60, 80), dtype=np.float32)
+    depth[20:40, 28:40] = 0.0
+    labels = np.zeros((60, 80), dtype=np.uint16)
+    labels[20:40, 40:60] = 1
+    grown = labels.copy()
+    grown[20:40, 28:40] = 1
+    return labels, grown, depth, rgb
+
+
+def test_grown_band_without_depth_that_looks_like_the_table_is_trimmed():
+    """A projector's shadow: the colour camera sees the table there."""
+    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_band_without_depth((118, 122, 120))
+    trimmed = trim_grown_missing(labels, grown, depth, rgb, SegmentationParams())
+    assert np.array_equal(trimmed, labels)
+
+
+def test_grown_band_without_depth_that_looks_like_the_object_stays():
+    """A dark or shiny side of the object that returned no depth (the chromaticity is smoothed, so
+    the band's outer corners may blend with the table)."""
+    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_band_without_depth((190, 40, 35))
+    trimmed = trim_grown_missing(labels, grown, depth, rgb, SegmentationParams())
+    band = grown[20:40, 28:40]
+    assert np.count_nonzero(trimmed[20:40, 28:40] == band) >= 0.98 * band.size
+    assert np.array_equal(trimmed[labels > 0], grown[labels > 0])
