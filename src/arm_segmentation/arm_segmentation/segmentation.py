@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from arm_core.boxes import mask_box
-from arm_core.camera import backproject_image, organized_normals, transform_points
+from arm_core.camera import backproject_image, backproject_pixels, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_core.settings import setting
 from arm_segmentation.boundary import (
@@ -80,6 +80,7 @@ class SegmentationParams:
     fill_radius_px: int = 1
     missing_rim_close_px: int = 4  # full-resolution pixels (trim_missing_rim)
     rim_window_px: int = 41  # full-resolution pixels: wider than a projector's shadow beside a near object
+    grown_on_support_m: float = 0.005  # grown pixels this near a support level pass the colour test
     fill_enclosed_missing: bool = True
     fill_closed_missing_px: int = 6  # pixels without depth in this closing of the instances join them (0: off)
     smooth_sigma_m: float = 0.01
@@ -365,7 +366,7 @@ def segment_detailed(
         objectness = upsample_linear(maps[1], stride, depth_full.shape)
     if objectness is not None and params.boundary.fill_objects:
         grown = grow_into_objectness(labels, objectness, params.boundary.fill_threshold, params.boundary.fill_reach_px)
-        labels = trim_grown_missing(labels, grown, depth_full, rgb_full, params)
+        labels = trim_grown(labels, grown, depth_full, rgb_full, K_full, T, stage.levels, params)
     if objectness is not None and outline_classifier is not None:
         labels = refine_outline(labels, rgb_full, depth_full, objectness, outline_classifier, params.outline)
     if exclude is not None and np.any(labels[exclude]):
@@ -433,34 +434,58 @@ def _trim_rim(labels, depth_m, rgb, close_px: int, window_px: int):
     rim = missing & ~(cv2.morphologyEx(solid.astype(np.uint8), cv2.MORPH_CLOSE, disk) > 0)
     if not np.any(rim):
         return labels
-    chroma = chromaticity(rgb)
-    background = ((labels == 0) & (depth_m > 0)).astype(np.float32)
-    ksize = (window_px, window_px)
-    count = cv2.boxFilter(background, -1, ksize, normalize=False)
-    around = cv2.boxFilter(chroma * background[..., None], -1, ksize, normalize=False)
     ys, xs = np.nonzero(rim)
-    owner = labels[ys, xs].astype(np.int64)
-    means = np.zeros((int(labels.max()) + 1, 3))
-    solid_means = instance_colours(np.where(solid, labels, 0), chroma)
-    means[: len(solid_means)] = solid_means
-    pixel = chroma[ys, xs]
-    local = around[ys, xs] / np.maximum(count[ys, xs], 1.0)[:, None]
-    to_background = np.where(count[ys, xs] > 0, hue_distance(pixel, local), np.inf)
-    drop = hue_distance(pixel, means[owner]) >= to_background
+    drop = _looks_like_background(labels, labels, depth_m, rgb, ys, xs, window_px)
     out = labels.copy()
     out[ys[drop], xs[drop]] = 0
     return out
 
 
-def trim_grown_missing(labels, grown, depth_m, rgb, params: SegmentationParams) -> np.ndarray:
-    """grown (labels after a growth step), without the added pixels lacking depth that
-    trim_missing_rim gives to the background: the object network cannot tell a structured-light
-    projector's shadow on the surface behind an object's edge from the object, the colour can."""
-    added = (labels == 0) & (grown > 0) & (depth_m <= 0)
-    if not np.any(added):
+def trim_grown(labels, grown, depth_m, rgb, K, T_world_camera, levels, params: SegmentationParams) -> np.ndarray:
+    """grown (labels after the object channel's growth), without the added pixels that lack depth
+    or lie on a support level (within params.grown_on_support_m) and whose chromaticity is nearer
+    the unlabelled pixels with depth around them (params.rim_window_px) than their instance's.
+
+    The object channel cannot tell a projector's shadow on the surface behind an object's edge, or
+    the table beside a base, from the object; the colour can. Pixels with depth above the support
+    stay: there the geometry backs the network."""
+    added = (labels == 0) & (grown > 0)
+    ys, xs = np.nonzero(added)
+    if not len(ys):
         return grown
-    trimmed = trim_missing_rim(grown, depth_m, rgb, params.missing_rim_close_px, params.rim_window_px)
-    return np.where(added, trimmed, grown)
+    test = depth_m[ys, xs] <= 0
+    z = backproject_pixels(depth_m, ys[~test], xs[~test], K, T_world_camera)[:, 2]
+    near_support = np.zeros(len(z), dtype=bool)
+    for level in levels:
+        near_support |= np.abs(z - level.height_m) <= params.grown_on_support_m
+    test[~test] = near_support
+    ys, xs = ys[test], xs[test]
+    if not len(ys):
+        return grown
+    box = instances_box(grown, params.rim_window_px)
+    rows, cols = ys - box[0].start, xs - box[1].start
+    drop = _looks_like_background(labels[box], grown[box], depth_m[box], rgb[box], rows, cols, params.rim_window_px)
+    out = grown.copy()
+    out[ys[drop], xs[drop]] = 0
+    return out
+
+
+def _looks_like_background(solid_labels, labels, depth_m, rgb, ys, xs, window_px: int) -> np.ndarray:
+    """bool per pixel (ys, xs) of an instance in labels: its chromaticity is at least as near the mean
+    of the unlabelled pixels with depth within window_px as its instance's mean over the pixels with
+    depth of solid_labels (never nearer when no such pixel is in the window)."""
+    chroma = chromaticity(rgb)
+    background = ((labels == 0) & (depth_m > 0)).astype(np.float32)
+    ksize = (window_px, window_px)
+    count = cv2.boxFilter(background, -1, ksize, normalize=False)
+    around = cv2.boxFilter(chroma * background[..., None], -1, ksize, normalize=False)
+    means = np.zeros((int(labels.max()) + 1, 3))
+    solid_means = instance_colours(np.where(depth_m > 0, solid_labels, 0), chroma)
+    means[: len(solid_means)] = solid_means
+    pixel = chroma[ys, xs]
+    local = around[ys, xs] / np.maximum(count[ys, xs], 1.0)[:, None]
+    to_background = np.where(count[ys, xs] > 0, hue_distance(pixel, local), np.inf)
+    return hue_distance(pixel, means[labels[ys, xs].astype(np.int64)]) >= to_background
 
 
 def drop_support_structure(labels, points_world, depth_m, support, levels, params: TableParams) -> np.ndarray:

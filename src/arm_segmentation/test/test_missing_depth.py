@@ -1,10 +1,12 @@
 """Pixels without depth on the objects' outlines and in their notches (fill_enclosed_missing), and
-beside them (trim_grown_missing)."""
+beside them (trim_grown)."""
 
 import numpy as np
+import pytest
 from scipy import ndimage
 
-from arm_segmentation.segmentation import SegmentationParams, fill_enclosed_missing, fill_holes, trim_grown_missing
+from arm_segmentation.segmentation import SegmentationParams, fill_enclosed_missing, fill_holes, trim_grown
+from arm_segmentation.table_plane import SupportLevel
 
 
 def _notched_square():
@@ -50,14 +52,21 @@ def test_fill_holes_matches_scipy_binary_fill_holes():
         assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask))
 
 
-def _red_box_on_grey_table_with_a_band_without_depth(band_rgb):
-    """A red 20x20 instance on a grey table, a 12 px band without depth left of it coloured band_rgb,
-    and the labels after a growth that gave the band to the box."""
+# a camera 1 m above the table looking straight down: depth 1 m is the table (world z = 0)
+K = np.array([[500.0, 0.0, 40.0], [0.0, 500.0, 30.0], [0.0, 0.0, 1.0]])
+T_WORLD_CAMERA = np.array([[1.0, 0, 0, 0], [0, -1.0, 0, 0], [0, 0, -1.0, 1.0], [0, 0, 0, 1.0]])
+TABLE = SupportLevel(0.0, 1.0, np.zeros((0, 3)), np.zeros((0, 2)))
+
+
+def _red_box_on_grey_table_with_a_grown_band(band_rgb, band_depth_m: float):
+    """A red 20x20 box 10 cm high on a grey table, a 12 px band left of it coloured band_rgb at
+    band_depth_m (0: no return), and the labels after a growth that gave the band to the box."""
     rgb = np.full((60, 80, 3), 120, dtype=np.uint8)
     rgb[20:40, 40:60] = (200, 30, 30)
     rgb[20:40, 28:40] = band_rgb
     depth = np.ones((60, 80), dtype=np.float32)
-    depth[20:40, 28:40] = 0.0
+    depth[20:40, 40:60] = 0.9
+    depth[20:40, 28:40] = band_depth_m
     labels = np.zeros((60, 80), dtype=np.uint16)
     labels[20:40, 40:60] = 1
     grown = labels.copy()
@@ -65,18 +74,27 @@ def _red_box_on_grey_table_with_a_band_without_depth(band_rgb):
     return labels, grown, depth, rgb
 
 
-def test_grown_band_without_depth_that_looks_like_the_table_is_trimmed():
-    """A projector's shadow: the colour camera sees the table there."""
-    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_band_without_depth((118, 122, 120))
-    trimmed = trim_grown_missing(labels, grown, depth, rgb, SegmentationParams())
-    assert np.array_equal(trimmed, labels)
+def _trim(labels, grown, depth, rgb):
+    return trim_grown(labels, grown, depth, rgb, K, T_WORLD_CAMERA, [TABLE], SegmentationParams())
 
 
-def test_grown_band_without_depth_that_looks_like_the_object_stays():
-    """A dark or shiny side of the object that returned no depth (the chromaticity is smoothed, so
-    the band's outer corners may blend with the table)."""
-    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_band_without_depth((190, 40, 35))
-    trimmed = trim_grown_missing(labels, grown, depth, rgb, SegmentationParams())
-    band = grown[20:40, 28:40]
-    assert np.count_nonzero(trimmed[20:40, 28:40] == band) >= 0.98 * band.size
+@pytest.mark.parametrize("band_depth_m", [0.0, 1.0])
+def test_grown_band_that_looks_like_the_table_is_trimmed(band_depth_m):
+    """A projector's shadow (no depth), or the table beside the base: the colour camera sees the table."""
+    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_grown_band((118, 122, 120), band_depth_m)
+    assert np.array_equal(_trim(labels, grown, depth, rgb), labels)
+
+
+@pytest.mark.parametrize("band_depth_m", [0.0, 1.0])
+def test_grown_band_that_looks_like_the_object_stays(band_depth_m):
+    """A dark or shiny side of the object without depth, or its base at the table's height (the
+    chromaticity is smoothed, so the band's outer corners may blend with the table)."""
+    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_grown_band((190, 40, 35), band_depth_m)
+    trimmed = _trim(labels, grown, depth, rgb)
+    assert np.count_nonzero(trimmed[20:40, 28:40] == 1) >= 0.98 * 20 * 12
     assert np.array_equal(trimmed[labels > 0], grown[labels > 0])
+
+
+def test_grown_band_with_depth_above_the_table_stays_whatever_its_colour():
+    labels, grown, depth, rgb = _red_box_on_grey_table_with_a_grown_band((118, 122, 120), 0.95)
+    assert np.array_equal(_trim(labels, grown, depth, rgb), grown)
