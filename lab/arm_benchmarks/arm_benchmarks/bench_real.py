@@ -8,6 +8,8 @@ per set it reports:
 - the support found: camera height above it (m), its normal in the camera frame, the share of the
   valid depth pixels on it, and whether the reconstructed objects rest on it (or on an object);
 - instances returned and the time per frame (whole command, and the segmentation alone);
+- the share of the instances' pixels with depth that lie on the support (within 5 mm of it): the
+  table beside an object taken for the object, measurable without labels;
 - the scene's stable fraction: the frame's scene.xml after physics_s of gravity; an object is stable
   when it moved < 2 cm and turned < 15 degrees;
 - with DIR/labels/<frame>.png: the UOIS metrics (overlap / boundary F, F@75, instances per object,
@@ -42,6 +44,7 @@ from arm_benchmarks.real.scene_physics import (
 )
 from arm_benchmarks.stats import json_safe, mean, median, percentile
 from arm_core.atomic_io import atomic_write, atomic_write_json
+from arm_core.camera import world_height
 from arm_offline.inputs import POSES_FILE, find_frames, find_intrinsics, load_camera, load_frame, load_poses
 from arm_offline.reconstruct_frames import SCENE_FILE, FrameReconstructor, OfflineSettings, camera_pose
 from arm_reconstruction.pipeline import Reconstructor
@@ -59,6 +62,7 @@ METRIC_KEYS = (
     "background_fp_fraction",
 )
 NOISE_TARGET_DEG, NOISE_TARGET_M, NOISE_TARGET_INSTANCES = 1.0, 0.005, 1
+ON_SUPPORT_M = 0.005  # an instance pixel this near the support plane lies on it
 BENCH_FILE = "bench.json"
 SHEET_WIDTH_PX = 480
 
@@ -135,6 +139,16 @@ def noise_stability(rgb, depth_m, K, T_world_camera, n_instances: int, processor
     return worst
 
 
+def on_support_share(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray):
+    """Share of the instances' pixels with depth within ON_SUPPORT_M of the support plane (world z = 0),
+    or None without such pixels. An object's base adds a thin line; the table beside it, more."""
+    seen = (labels > 0) & (depth_m > 0)
+    if not np.any(seen):
+        return None
+    height = world_height(depth_m, K, T_world_camera)
+    return float(np.mean(np.abs(height[seen]) < ON_SUPPORT_M))
+
+
 def contact_sheet(overlay_rgb: np.ndarray, views: list[np.ndarray], titles: list[str]) -> np.ndarray:
     """One row: each image scaled to SHEET_WIDTH_PX wide with its title written on it (RGB)."""
     tiles = []
@@ -185,10 +199,11 @@ def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng
     row["stable"] = sum(m.stable for m in motions)
     row["resting"] = sum(m.resting for m in motions)
     rgb, depth_m = processor.undistorted(*load_frame(files, camera, args.depth_scale), camera)
+    predicted = cv2.imread(str(folder / "labels.png"), cv2.IMREAD_UNCHANGED)
+    row["on_support_share"] = on_support_share(predicted, depth_m, camera.K, T_world_camera)
     labels_path = files.colour[0].parent.parent / LABELS_DIR / f"{files.name}.png"
     if labels_path.is_file():
         truth = cv2.imread(str(labels_path), cv2.IMREAD_UNCHANGED)
-        predicted = cv2.imread(str(folder / "labels.png"), cv2.IMREAD_UNCHANGED)
         metrics = segmentation_metrics(predicted, truth)
         row["metrics"] = {k: float(metrics[k]) for k in METRIC_KEYS} | {"n_gt": metrics["n_gt"]}
         if not np.any((truth > 0) & (depth_m <= 0)):
@@ -235,6 +250,7 @@ def aggregate(rows: list[dict]) -> dict:
         "objects_simulated": len(objects),
         "stable_fraction": mean([o["stable"] for o in objects]),
         "resting_fraction": mean([o["resting"] for o in objects]),
+        "on_support_share": mean([r["on_support_share"] for r in ok if r.get("on_support_share") is not None]),
         "time_s_median": median(times),
         "time_s_p90": percentile(times, 90),
         "segmentation_s_median": median(seg_times),
@@ -268,18 +284,20 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
         "estimate unless a poses.json is given. Stable: moved < "
         f"{STABLE_MOVE_M * 100:g} cm and turned < {STABLE_TURN_DEG:g} deg after {summary['physics_s']:g} s of "
         "gravity on the frame's own scene.xml. Noise held: over the noisy copies, the support moved < 1 deg "
-        "and < 5 mm and the instance count by at most one.",
+        "and < 5 mm and the instance count by at most one. On support: the share of the instances' pixels "
+        f"with depth within {ON_SUPPORT_M * 1000:g} mm of the support (the table taken for an object).",
         "",
-        "| set | frames | support found | empty | instances / frame | stable | resting | noise held | "
+        "| set | frames | support found | empty | instances / frame | on support | stable | resting | noise held | "
         "time / frame (s) | segmentation (s) | overlap F | boundary F | F@75 | inst. / object | background FP |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, s in summary["sets"].items():
         m = s.get("metrics", {})
         noise = s.get("noise", {})
         lines.append(
             f"| {name} | {s['frames']} | {s['support_found']} | {len(s['empty_frames'])} | "
-            f"{_fmt(s['instances_per_frame'], digits=2)} | {_fmt(s['stable_fraction'])} | "
+            f"{_fmt(s['instances_per_frame'], digits=2)} | {_fmt(s.get('on_support_share'))} | "
+            f"{_fmt(s['stable_fraction'])} | "
             f"{_fmt(s['resting_fraction'])} | {_fmt(noise.get('held_fraction'))} | "
             f"{_fmt(s['time_s_median'], digits=2)} | "
             f"{_fmt(s['segmentation_s_median'])} | {_fmt(m.get('overlap_f'))} | {_fmt(m.get('boundary_f'))} | "

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from arm_benchmarks.bench_real import main, perturbed_depth
+from arm_benchmarks.bench_real import main, on_support_share, perturbed_depth
 from arm_core.camera import look_at
 from arm_sim.objects import object_pool
 from arm_sim.scenes import cluttered_scene
@@ -47,6 +47,19 @@ def test_perturbed_depth_keeps_missing_returns_missing():
     assert np.allclose(noisy * 1000, np.round(noisy * 1000), atol=1e-3), "whole millimetres, as a sensor encodes"
 
 
+def test_on_support_share_counts_instance_pixels_on_the_table_plane():
+    K = np.array([[100.0, 0, 20], [0, 100.0, 15], [0, 0, 1]])
+    T_world_camera = np.array([[1.0, 0, 0, 0], [0, -1.0, 0, 0], [0, 0, -1.0, 1.0], [0, 0, 0, 1.0]])  # 1 m above, down
+    depth = np.ones((30, 40), np.float32)
+    depth[10:20, 10:20] = 0.9  # a box 10 cm high
+    labels = np.zeros((30, 40), np.uint16)
+    labels[10:20, 10:20] = 1
+    assert on_support_share(labels, depth, K, T_world_camera) == 0.0
+    labels[10:20, 20:30] = 1  # as much table beside it taken for the box
+    assert on_support_share(labels, depth, K, T_world_camera) == 0.5
+    assert on_support_share(np.zeros_like(labels), depth, K, T_world_camera) is None
+
+
 def test_reports_support_scene_physics_metrics_and_noise_and_resumes(labelled_folder, tmp_path):
     out = tmp_path / "real"
     args = [str(labelled_folder), "--out", str(out), "--noise-copies", "2", "--physics-s", "0.5"]
@@ -56,6 +69,7 @@ def test_reports_support_scene_physics_metrics_and_noise_and_resumes(labelled_fo
     assert totals["frames"] == 1 and totals["support_found"] == 1 and not totals["failed_frames"]
     assert totals["instances"] >= 2 and totals["objects_simulated"] >= 2
     assert 0.0 <= totals["stable_fraction"] <= 1.0 and totals["noise"]["frames"] == 1
+    assert 0.0 <= totals["on_support_share"] < 0.2
     assert totals["metrics"]["overlap_f"] > 0.5 and totals["metrics"]["frames"] == 1
     row = summary["frames"][labelled_folder.name][0]
     assert abs(row["normal_camera"][1]) > 0.3 and row["camera_height_m"] > 0.3
