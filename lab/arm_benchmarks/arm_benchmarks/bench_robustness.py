@@ -34,7 +34,7 @@ from arm_benchmarks.robustness.cases.reconstruction import run_reconstruction_ba
 from arm_benchmarks.robustness.cases.segmentation import run_segmentation_bad_inputs
 from arm_benchmarks.robustness.cases.sim import run_sim_bad_inputs
 from arm_benchmarks.robustness.frames import render_frames
-from arm_benchmarks.robustness.load import run_fault, run_load, start_graph, stop_graph
+from arm_benchmarks.robustness.load import rate_against_first_window, run_fault, run_load, start_graph, stop_graph
 from arm_benchmarks.robustness.logs import tracebacks
 from arm_benchmarks.robustness.messages import camera_messages
 from arm_benchmarks.robustness.nodes import ROOT, reconstruction_checkpoint, reconstruction_params
@@ -300,6 +300,10 @@ def _figures(phases: dict) -> dict:
             "camera_hz_achieved": load["rates_hz"]["camera"],
             "segmented_frames_hz": load["rates_hz"]["segmentation"],
             "meshes_hz": load["rates_hz"]["reconstruction"],
+            "rates_by_minute_hz": load.get("rates_by_minute_hz", {}),
+            "rate_against_first_minute": {
+                k: rate_against_first_window(v) for k, v in load.get("rates_by_minute_hz", {}).items()
+            },
             "memory_growth_trend_mb": {k: v.get("trend_growth_mb") for k, v in load["memory"].items()},
             "memory_growth_floor_mb": {k: v.get("floor_growth_mb") for k, v in load["memory"].items()},
             "max_memory_growth_mb": {k: v["max_growth_mb"] for k, v in load["memory"].items()},

@@ -110,6 +110,33 @@ def steady_growth_mb(series: list[float]) -> float | None:
     return round(min(steps), 1)
 
 
+def rates_by_window(samples: list[dict], stream: str, window_s: float = 60.0) -> list[float]:
+    """Messages per second of `stream` in each whole window_s of a run, from the samples' running
+    totals (count_<stream> at t_s seconds), interpolated at the windows' edges."""
+    if len(samples) < 2:
+        return []
+    t = np.array([s["t_s"] for s in samples], dtype=np.float64)
+    count = np.array([s[f"count_{stream}"] for s in samples], dtype=np.float64)
+    edges = np.arange(t[0], t[-1] + 1e-9, window_s)
+    if len(edges) < 2:
+        return []
+    return [round(float(r), 2) for r in np.diff(np.interp(edges, t, count)) / window_s]
+
+
+def rate_against_first_window(rates: list[float], tolerance: float = 0.1) -> dict | None:
+    """The first window's rate against the later ones: their median and lowest, and the share of
+    them within `tolerance` (relative) of the first."""
+    if len(rates) < 2 or rates[0] <= 0:
+        return None
+    first, later = rates[0], np.asarray(rates[1:])
+    return {
+        "first_hz": first,
+        "later_median_hz": round(float(np.median(later)), 2),
+        "later_lowest_hz": round(float(later.min()), 2),
+        "later_within_tolerance": round(float(np.mean(np.abs(later / first - 1.0) <= tolerance)), 2),
+    }
+
+
 def run_load(
     probe,
     graph: dict[str, NodeProcess],
@@ -192,6 +219,7 @@ def run_load(
         "warmup_meshes": warmup_meshes,
         "duration_s": round(elapsed, 1),
         "rates_hz": rates,
+        "rates_by_minute_hz": {k: rates_by_window(samples, k) for k in totals},
         "lag": lag,
         "memory": memory,
         "samples": samples,
