@@ -301,6 +301,7 @@ def _figures(phases: dict) -> dict:
             "segmented_frames_hz": load["rates_hz"]["segmentation"],
             "meshes_hz": load["rates_hz"]["reconstruction"],
             "rates_by_minute_hz": load.get("rates_by_minute_hz", {}),
+            "cpu_s_per_s_by_minute": load.get("cpu_by_minute", {}),
             "rate_against_first_minute": {
                 k: rate_against_first_window(v) for k, v in load.get("rates_by_minute_hz", {}).items()
             },

@@ -57,6 +57,16 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def cpu_s(pid: int) -> float:
+    """CPU seconds a process has used, user and system, all its threads (nan once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime: fields 14, 15
+
+
 def _param_text(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -109,6 +119,9 @@ class NodeProcess:
 
     def rss_mb(self) -> float:
         return rss_mb(self.pid) if self.alive() else float("nan")
+
+    def cpu_s(self) -> float:
+        return cpu_s(self.pid) if self.alive() else float("nan")
 
     def kill9(self) -> None:
         if self.alive():

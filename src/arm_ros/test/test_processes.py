@@ -51,11 +51,12 @@ def test_sim_node_starts_with_its_parameter_file_and_exits_0_on_sigint(tmp_path)
         assert process.cmd[process.cmd.index("--params-file") + 1] == str(config_file("sim_node.yaml"))
         assert "n_objects:=1" in process.cmd and "clock:=sim_clock" in process.cmd
         assert wait_for_text(process, "sim ready: 1 objects", 60.0), process.log()
-        assert process.rss_mb() > 10.0
+        assert process.rss_mb() > 10.0 and process.cpu_s() > 0.1  # loading MuJoCo and rclpy took CPU
     finally:
         code = process.stop(signal.SIGINT, timeout_s=15.0)
     assert code == 0, process.log()
     assert not process.alive() and process.rss_mb() != process.rss_mb()  # nan once it is gone
+    assert process.cpu_s() != process.cpu_s()
 
 
 def test_an_invalid_parameter_ends_the_node_with_exit_code_2(tmp_path):

@@ -5,6 +5,7 @@ memory of every node process, and survival of a kill -9 of the reconstruction no
 
 from __future__ import annotations
 
+import os
 import signal
 import time
 
@@ -110,6 +111,16 @@ def steady_growth_mb(series: list[float]) -> float | None:
     return round(min(steps), 1)
 
 
+def machine_steal_s() -> float:
+    """CPU seconds the hypervisor has given to other guests (/proc/stat's steal column, all CPUs)."""
+    try:
+        with open("/proc/stat") as stat:
+            fields = stat.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
 def rates_by_window(samples: list[dict], stream: str, window_s: float = 60.0) -> list[float]:
     """Messages per second of `stream` in each whole window_s of a run, from the samples' running
     totals (count_<stream> at t_s seconds), interpolated at the windows' edges."""
@@ -165,6 +176,8 @@ def run_load(
             {
                 "t_s": round(time.monotonic() - begin, 2),
                 **{f"rss_mb_{k}": round(p.rss_mb(), 1) for k, p in graph.items()},
+                **{f"count_cpu_s_{k}": round(p.cpu_s(), 2) for k, p in graph.items()},
+                "count_steal_s": machine_steal_s(),
                 **{f"count_{k}": v for k, v in watch.totals().items()},
             }
         )
@@ -220,6 +233,11 @@ def run_load(
         "duration_s": round(elapsed, 1),
         "rates_hz": rates,
         "rates_by_minute_hz": {k: rates_by_window(samples, k) for k in totals},
+        # CPU seconds per second, per node, and the CPU the hypervisor took from this machine
+        "cpu_by_minute": {
+            **{k: rates_by_window(samples, f"cpu_s_{k}") for k in graph},
+            "stolen_by_hypervisor": rates_by_window(samples, "steal_s"),
+        },
         "lag": lag,
         "memory": memory,
         "samples": samples,
