@@ -13,11 +13,12 @@ def mask_box(
     resolution (mask pixel (r, c) covers image rows r * stride .. (r + 1) * stride - 1), margin_px
     and the slices are in image pixels; shape: the image's (rows, cols), the mask's times stride by
     default."""
-    rows, cols = np.nonzero(mask)
+    rows = np.flatnonzero(np.any(mask, axis=1))  # projections: cheaper than every nonzero pixel
     if rows.size == 0:
         return None
+    cols = np.flatnonzero(np.any(mask, axis=0))
     height, width = shape if shape is not None else (mask.shape[0] * stride, mask.shape[1] * stride)
     return (
-        slice(max(int(rows.min()) * stride - margin_px, 0), min((int(rows.max()) + 1) * stride + margin_px, height)),
-        slice(max(int(cols.min()) * stride - margin_px, 0), min((int(cols.max()) + 1) * stride + margin_px, width)),
+        slice(max(int(rows[0]) * stride - margin_px, 0), min((int(rows[-1]) + 1) * stride + margin_px, height)),
+        slice(max(int(cols[0]) * stride - margin_px, 0), min((int(cols[-1]) + 1) * stride + margin_px, width)),
     )

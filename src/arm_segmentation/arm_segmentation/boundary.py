@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from arm_core.boxes import mask_box
+
 
 @dataclass(frozen=True)
 class BorderParams:
@@ -37,12 +39,7 @@ def nearest_pixel(mask: np.ndarray, at: tuple[np.ndarray, np.ndarray]) -> tuple[
 def instances_box(labels: np.ndarray, margin_px: int) -> tuple[slice, slice] | None:
     """(rows, cols) slices of the instances' bounding box grown by margin_px (clipped to the
     image), or None without instances."""
-    ys, xs = np.nonzero(labels)
-    if len(ys) == 0:
-        return None
-    m, (height, width) = margin_px, labels.shape
-    rows = slice(max(int(ys.min()) - m, 0), min(int(ys.max()) + m + 1, height))
-    return rows, slice(max(int(xs.min()) - m, 0), min(int(xs.max()) + m + 1, width))
+    return mask_box(labels, margin_px)
 
 
 def refine_borders(labels: np.ndarray, rgb: np.ndarray, params: BorderParams = BorderParams()) -> np.ndarray:
