@@ -302,6 +302,8 @@ def _figures(phases: dict) -> dict:
             "meshes_hz": load["rates_hz"]["reconstruction"],
             "rates_by_minute_hz": load.get("rates_by_minute_hz", {}),
             "cpu_s_per_s_by_minute": load.get("cpu_by_minute", {}),
+            "segmentation_messages_taken_by_minute_hz": load.get("segmentation_messages_taken_by_minute_hz"),
+            "segmentation_frame_ms_by_minute": load.get("segmentation_frame_ms_by_minute"),
             "rate_against_first_minute": {
                 k: rate_against_first_window(v) for k, v in load.get("rates_by_minute_hz", {}).items()
             },

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from arm_benchmarks.robustness.load import rate_against_first_window, rates_by_window
+from arm_benchmarks.robustness.load import medians_by_window, rate_against_first_window, rates_by_window
 
 
 def _samples(rate_hz_at, duration_s: float = 180.0, period_s: float = 1.0):
@@ -24,3 +24,9 @@ def test_a_steady_rate_is_within_tolerance_and_short_runs_give_nothing():
     assert rate_against_first_window(steady)["later_within_tolerance"] == 1.0
     assert rates_by_window(_samples(lambda t: 4.0, duration_s=30.0), "segmentation") == []
     assert rate_against_first_window([4.0]) is None and rate_against_first_window([0.0, 4.0]) is None
+
+
+def test_medians_by_window_leave_out_missing_samples():
+    value = [200.0 if t < 60 else (float("nan") if t % 2 else 300.0) for t in range(150)]
+    samples = [{"t_s": float(t), "frame_ms": v} for t, v in enumerate(value)]
+    assert medians_by_window(samples, "frame_ms") == [200.0, 300.0]

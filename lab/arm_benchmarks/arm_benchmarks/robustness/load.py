@@ -134,6 +134,17 @@ def rates_by_window(samples: list[dict], stream: str, window_s: float = 60.0) ->
     return [round(float(r), 2) for r in np.diff(np.interp(edges, t, count)) / window_s]
 
 
+def medians_by_window(samples: list[dict], key: str, window_s: float = 60.0) -> list[float]:
+    """Median of the sampled value `key` in each whole window_s of a run (NaN samples left out)."""
+    t = np.array([s["t_s"] for s in samples], dtype=np.float64)
+    value = np.array([s[key] for s in samples], dtype=np.float64)
+    out = []
+    for start in np.arange(t[0], t[-1] - window_s + 1e-9, window_s) if len(t) else []:
+        inside = (t >= start) & (t < start + window_s) & np.isfinite(value)
+        out.append(round(float(np.median(value[inside])), 1) if np.any(inside) else float("nan"))
+    return out
+
+
 def rate_against_first_window(rates: list[float], tolerance: float = 0.1) -> dict | None:
     """The first window's rate against the later ones: their median and lowest, and the share of
     them within `tolerance` (relative) of the first."""
@@ -178,6 +189,10 @@ def run_load(
                 **{f"rss_mb_{k}": round(p.rss_mb(), 1) for k, p in graph.items()},
                 **{f"count_cpu_s_{k}": round(p.cpu_s(), 2) for k, p in graph.items()},
                 "count_steal_s": machine_steal_s(),
+                # the segmentation node's own counters (its diagnostics, once a second): the messages its
+                # executor took from DDS, and how long its last frame took from decoding to publishing
+                "count_segmentation_messages_taken": probe.diagnostic_number("segmentation_node", "messages_received"),
+                "segmentation_frame_ms": probe.diagnostic_number("segmentation_node", "last_latency_ms"),
                 **{f"count_{k}": v for k, v in watch.totals().items()},
             }
         )
@@ -234,6 +249,8 @@ def run_load(
         "rates_hz": rates,
         "rates_by_minute_hz": {k: rates_by_window(samples, k) for k in totals},
         # CPU seconds per second, per node, and the CPU the hypervisor took from this machine
+        "segmentation_messages_taken_by_minute_hz": rates_by_window(samples, "segmentation_messages_taken"),
+        "segmentation_frame_ms_by_minute": medians_by_window(samples, "segmentation_frame_ms"),
         "cpu_by_minute": {
             **{k: rates_by_window(samples, f"cpu_s_{k}") for k in graph},
             "stolen_by_hypervisor": rates_by_window(samples, "steal_s"),
