@@ -248,9 +248,9 @@ def run_load(
         "duration_s": round(elapsed, 1),
         "rates_hz": rates,
         "rates_by_minute_hz": {k: rates_by_window(samples, k) for k in totals},
-        # CPU seconds per second, per node, and the CPU the hypervisor took from this machine
         "segmentation_messages_taken_by_minute_hz": rates_by_window(samples, "segmentation_messages_taken"),
         "segmentation_frame_ms_by_minute": medians_by_window(samples, "segmentation_frame_ms"),
+        # CPU seconds per second, per node, and the CPU the hypervisor took from this machine
         "cpu_by_minute": {
             **{k: rates_by_window(samples, f"cpu_s_{k}") for k in graph},
             "stolen_by_hypervisor": rates_by_window(samples, "steal_s"),
