@@ -20,3 +20,11 @@ def test_box_of_a_coarse_mask_is_in_the_pixels_of_the_full_image():
     edge = np.zeros((240, 320), dtype=bool)
     edge[239, 319] = True
     assert mask_box(edge, margin_px=5, stride=2, shape=(479, 639)) == (slice(473, 479), slice(633, 639))
+
+
+def test_box_of_a_label_image_is_the_grown_bounding_box_of_its_instances_clipped_to_the_image():
+    labels = np.zeros((30, 40), np.uint16)
+    assert mask_box(labels, 3) is None
+    labels[2:5, 30:38] = 1
+    labels[10, 12] = 2
+    assert mask_box(labels, 3) == (slice(0, 14), slice(9, 40))

@@ -36,15 +36,9 @@ def nearest_pixel(mask: np.ndarray, at: tuple[np.ndarray, np.ndarray]) -> tuple[
     return np.divmod(flat[index[at] - 1], mask.shape[1])
 
 
-def instances_box(labels: np.ndarray, margin_px: int) -> tuple[slice, slice] | None:
-    """(rows, cols) slices of the instances' bounding box grown by margin_px (clipped to the
-    image), or None without instances."""
-    return mask_box(labels, margin_px)
-
-
 def refine_borders(labels: np.ndarray, rgb: np.ndarray, params: BorderParams = BorderParams()) -> np.ndarray:
     """uint16 labels with the pixels near the instances' outlines reassigned by colour."""
-    box = instances_box(labels, 3 * params.band_px + 2)
+    box = mask_box(labels, 3 * params.band_px + 2)
     if params.band_px <= 0 or box is None:
         return labels
     out = labels.copy()
@@ -102,7 +96,7 @@ def grow_into_objectness(labels: np.ndarray, objectness: np.ndarray, threshold: 
     network's object channel at full resolution) exceeds threshold and that lie within reach_px of
     an instance given to the nearest instance: flat bases in the table band and surfaces without
     depth that geometry leaves out."""
-    box = instances_box(labels, reach_px + 1)
+    box = mask_box(labels, reach_px + 1)
     if box is None or reach_px <= 0:
         return labels
     crop = labels[box]

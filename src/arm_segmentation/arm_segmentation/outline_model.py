@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from arm_segmentation.boundary import OutlineBand, instances_box, outline_band
+from arm_core.boxes import mask_box
+from arm_segmentation.boundary import OutlineBand, outline_band
 from arm_segmentation.clustering import channel_mean
 from arm_segmentation.perceptron import Perceptron, shared_perceptron
 
@@ -140,7 +141,7 @@ class OutlineClassifier(Perceptron):
 def refine_outline(labels, rgb, depth_m, objectness, classifier: OutlineClassifier, params: OutlineParams):
     """uint16 labels with the pixels near the instances' outlines given to the nearest instance
     where the classifier says they are its object, and to the background elsewhere."""
-    box = instances_box(labels, 4 * params.band_px + 4)
+    box = mask_box(labels, 4 * params.band_px + 4)
     if box is None:
         return labels
     crop = labels[box]

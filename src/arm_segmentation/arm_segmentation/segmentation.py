@@ -15,7 +15,6 @@ from arm_core.settings import setting
 from arm_segmentation.boundary import (
     BorderParams,
     grow_into_objectness,
-    instances_box,
     nearest_pixel,
     refine_borders,
 )
@@ -389,7 +388,7 @@ def fill_enclosed_missing(labels: np.ndarray, depth_m: np.ndarray, close_px: int
     """Labels with the pixels without depth that the instances enclose (dropout blobs on dark and
     shiny objects), or that their closing by a disc of radius close_px covers, given to the
     nearest instance."""
-    box = instances_box(labels, close_px + 1)
+    box = mask_box(labels, close_px + 1)
     if box is None:
         return labels
     crop = labels[box]
@@ -417,7 +416,7 @@ def trim_missing_rim(labels: np.ndarray, depth_m: np.ndarray, rgb: np.ndarray, c
     depth inside the closing (radius close_px) of an instance's pixels with depth are holes and
     gaps of the object and stay; outside it they stay only where their chromaticity is nearer to
     the instance's mean than to the mean of the unlabelled pixels with depth within window_px."""
-    box = instances_box(labels, window_px + close_px)
+    box = mask_box(labels, window_px + close_px)
     if close_px <= 0 or box is None:
         return labels
     out = labels.copy()
@@ -462,7 +461,7 @@ def trim_grown(labels, grown, depth_m, rgb, K, T_world_camera, levels, params: S
     ys, xs = ys[test], xs[test]
     if not len(ys):
         return grown
-    box = instances_box(grown, params.rim_window_px)
+    box = mask_box(grown, params.rim_window_px)
     rows, cols = ys - box[0].start, xs - box[1].start
     drop = _looks_like_background(labels[box], grown[box], depth_m[box], rgb[box], rows, cols, params.rim_window_px)
     out = grown.copy()

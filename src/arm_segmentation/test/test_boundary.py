@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from arm_segmentation.boundary import BorderParams, grow_into_objectness, instances_box, nearest_pixel, refine_borders
+from arm_segmentation.boundary import BorderParams, grow_into_objectness, nearest_pixel, refine_borders
 
 
 def _scene():
@@ -68,11 +68,3 @@ def test_grow_into_objectness_without_instances_or_reach_is_a_no_op():
     labels = empty.copy()
     labels[5:10, 5:10] = 1
     assert np.array_equal(grow_into_objectness(labels, objectness, 0.5, 0), labels)
-
-
-def test_instances_box_is_the_grown_bounding_box_clipped_to_the_image():
-    labels = np.zeros((30, 40), np.uint16)
-    assert instances_box(labels, 3) is None
-    labels[2:5, 30:38] = 1
-    labels[10, 12] = 2
-    assert instances_box(labels, 3) == (slice(0, 14), slice(9, 40))
