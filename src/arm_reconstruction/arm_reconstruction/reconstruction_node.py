@@ -8,6 +8,7 @@ Malformed frames are logged (rate-limited) and nothing is published for them. Di
 (per-stage latency, frame counts) follow every frame and a 1 s timer.
 """
 
+import threading
 import time
 
 import rclpy
@@ -32,7 +33,6 @@ from arm_ros.common import (
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.frames import frame_from_msg
 from arm_ros.goal_activity import goal_pause
-from arm_ros.latest_worker import LatestWorker
 from arm_ros.tf import TfPublisher
 
 from .checkpoint import CheckpointError
@@ -65,24 +65,34 @@ class ReconstructionNode(Node):
 
         self.received = self.processed = self.dropped = self.rejected = 0
         self.last_start_s = -float("inf")  # time.monotonic() when the last frame's reconstruction began
+        self._latest: SegmentedFrame | None = None
+        self._wake = threading.Condition()
+        self._stop = False
         self._stage_values: dict = {}
         self._status = (DiagnosticStatus.OK, "waiting for frames")
         self.create_timer(1.0, self.publish_diagnostics)
-        # on_change runs in the executor's callbacks, which start after the constructor
-        self.goals = goal_pause(self, config.goal_pause, lambda: self.worker.notify())
-        self.worker = LatestWorker(self._start, "reconstruction", self._wait_s)
+        self.goals = goal_pause(self, config.goal_pause, self._notify)
         self.preempted = 0
         if self.goals is not None:  # a frame in progress when a goal comes is abandoned, redone after it
             self.reconstructor.should_stop = lambda: self.goals.seconds_left() > 0
+        self._worker = threading.Thread(target=self._work, name="reconstruction", daemon=True)
+        self._worker.start()
         self.get_logger().info(
             f"reconstruction ready: method {settings.method}, resolution {self.reconstructor.resolution}, "
             f"device {self.reconstructor.device}"
         )
 
     def on_frame(self, msg: SegmentedFrame) -> None:
-        self.received += 1
-        if self.worker.offer(msg):
-            self.dropped += 1
+        with self._wake:
+            self.received += 1
+            if self._latest is not None:
+                self.dropped += 1
+            self._latest = msg
+            self._wake.notify()
+
+    def _notify(self) -> None:
+        with self._wake:
+            self._wake.notify()
 
     def _wait_s(self) -> float:
         """Seconds until the next frame may start (<= 0: now): max_rate_hz's spacing, and a goal being
@@ -92,18 +102,25 @@ class ReconstructionNode(Node):
             wait_s = max(wait_s, min(goal_s, 1.0))
         return wait_s
 
-    def _start(self, msg: SegmentedFrame) -> None:
-        self.last_start_s = time.monotonic()
-        self.process(msg)
+    def _work(self) -> None:
+        while True:
+            with self._wake:
+                while not self._stop and (self._latest is None or self._wait_s() > 0):
+                    self._wake.wait(None if self._latest is None else self._wait_s())
+                if self._stop:
+                    return
+                msg, self._latest = self._latest, None  # the newest frame: older ones were dropped
+            self.last_start_s = time.monotonic()
+            self.process(msg)
 
     def _publish(self, publisher, msg) -> bool:
         """Publish unless shutting down; a publish that SIGINT/SIGTERM invalidated is dropped quietly."""
-        if self.worker.stopping or not self.context.ok():
+        if self._stop or not self.context.ok():
             return False
         try:
             publisher.publish(msg)
         except Exception:
-            if self.context.ok() and not self.worker.stopping:
+            if self.context.ok() and not self._stop:
                 raise
             return False
         return True
@@ -115,7 +132,9 @@ class ReconstructionNode(Node):
             objects = self.reconstructor(frame.rgb, frame.depth_m, frame.K, frame.T_world_camera, frame.labels)
         except ReconstructionPreempted:
             self.preempted += 1
-            self.worker.offer_if_idle(msg)  # redone after the goal, unless a newer frame came
+            with self._wake:
+                if self._latest is None:  # nothing newer came: this frame is redone after the goal
+                    self._latest = msg
             return
         except (ConversionError, FrameInputError) as error:
             self._reject(f"{type(error).__name__}: {error}", f"dropping malformed segmented frame: {error}")
@@ -179,7 +198,10 @@ class ReconstructionNode(Node):
         """Stop the worker. A frame still being reconstructed after 5 s is abandoned: its publishes
         are dropped (see _publish), so a node stopped mid-frame on a loaded CPU still exits well
         inside the usual 15 s SIGINT-to-SIGKILL grace."""
-        self.worker.close(timeout_s=5.0)
+        with self._wake:
+            self._stop = True
+            self._wake.notify()
+        self._worker.join(timeout=5.0)
 
 
 def _make_node() -> ReconstructionNode:

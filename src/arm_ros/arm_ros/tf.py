@@ -11,7 +11,6 @@ buffer behind the same two methods instead.
 """
 
 import re
-import threading
 from collections import OrderedDict, deque
 
 import numpy as np
@@ -50,13 +49,11 @@ class TfPublisher:
 
 
 class TfListener:
-    """The latest transform between any two connected frames of /tf and /tf_static. Looked up from any
-    thread (a node's worker) while the executor adds transforms."""
+    """The latest transform between any two connected frames of /tf and /tf_static."""
 
     def __init__(self, node, max_frames: int = 1000):
         self.max_frames = int(max_frames)
         self._parent: OrderedDict[str, tuple[str, np.ndarray]] = OrderedDict()  # child -> (parent, T_parent_child)
-        self._lock = threading.Lock()
         node.create_subscription(TFMessage, "/tf", self.on_message, TF_QOS)
         node.create_subscription(TFMessage, "/tf_static", self.on_message, TF_STATIC_QOS)
 
@@ -69,16 +66,13 @@ class TfListener:
                 T = transform_msg_to_matrix(t)
             except ConversionError:
                 continue  # a malformed transform is skipped, the rest of the message is kept
-            with self._lock:
-                self._parent[child] = (parent, T)
-                self._parent.move_to_end(child)
-                while len(self._parent) > self.max_frames:
-                    self._parent.popitem(last=False)
+            self._parent[child] = (parent, T)
+            self._parent.move_to_end(child)
+            while len(self._parent) > self.max_frames:
+                self._parent.popitem(last=False)
 
     def frames(self) -> set[str]:
-        with self._lock:
-            edges = list(self._parent.items())
-        return {child for child, _ in edges} | {parent for _, (parent, _) in edges}
+        return set(self._parent) | {parent for parent, _ in self._parent.values()}
 
     def lookup(self, target: str, source: str) -> np.ndarray | None:
         """4x4 T_target_source (a point in source's frame, expressed in target's), or None when the two
@@ -86,10 +80,8 @@ class TfListener:
         target, source = target.lstrip("/"), source.lstrip("/")
         if target == source:
             return np.eye(4)
-        with self._lock:
-            edges = list(self._parent.items())
         neighbours: dict[str, list[tuple[str, np.ndarray]]] = {}
-        for child, (parent, T) in edges:
+        for child, (parent, T) in self._parent.items():
             neighbours.setdefault(parent, []).append((child, T))  # T_parent_child
             neighbours.setdefault(child, []).append((parent, np.linalg.inv(T)))  # T_child_parent
         seen, queue = {target}, deque([(target, np.eye(4))])

@@ -10,11 +10,6 @@ in the log and in /diagnostics. With camera_pose_source:=tf, T_world_camera is l
 /tf_static from world_frame to the depth image's frame_id (the driver's optical frame); a frame
 without that transform is skipped, and says which frames /tf knows.
 
-The callbacks only synchronize: the newest complete set is segmented by a worker thread
-(arm_ros.latest_worker), so the executor keeps taking camera messages while a frame is segmented and
-the next set is complete when the worker is free; a set that waits when a newer one completes is
-replaced (counted in sets_replaced).
-
 While the planner serves a goal (pause_during_goals, as reconstruction_node) camera messages are
 dropped unprocessed: reconstruction holds frames back then anyway, and planning gets the CPU.
 Set it false on both nodes for closed-loop re-planning from new meshes (plan_node's replan_period_s)."""
@@ -38,7 +33,6 @@ from arm_ros.common import (
 )
 from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
 from arm_ros.goal_activity import goal_pause
-from arm_ros.latest_worker import LatestWorker
 from arm_ros.tf import TfPublisher, tf_listener
 from arm_segmentation.boundary_net import shared_predictor
 from arm_segmentation.camera_pose_estimate import CameraPoseError
@@ -115,9 +109,7 @@ class SegmentationNode(Node):
         self.last_empty_reason = ""
         self.last_error = ""
         self.messages_skipped_for_goals = 0
-        self.sets_replaced = 0
         self.goals = goal_pause(self, config.goal_pause)
-        self.worker = LatestWorker(self._segment_set, "segmentation")
         self.create_timer(1.0, self.publish_diagnostics)
         mode = "ground-truth masks" if self.use_ground_truth else "segmentation"
         self.get_logger().info(
@@ -165,23 +157,8 @@ class SegmentationNode(Node):
             self.errors.error("bad_stamp", f"{self.inputs[index]} message has an invalid stamp")
             return
         match = self.sync.add(index, stamp, msg)
-        if match is not None and self.worker.offer(dict(zip(self.inputs, match[1], strict=True))):
-            self.sets_replaced += 1
-
-    def _segment_set(self, inputs: dict) -> None:
-        """The worker's step: one complete set of camera messages, unless a goal began meanwhile.
-        A failure inside one frame is logged and the node goes on."""
-        if self.goals is not None and self.goals.seconds_left() > 0:
-            self.messages_skipped_for_goals += len(inputs)
-            return
-        try:
-            self.process(**inputs)
-        except Exception as error:
-            if self.worker.stopping or not self.context.ok():
-                return  # a publish that SIGINT/SIGTERM invalidated
-            self.frames_rejected += 1
-            self.last_error = f"{type(error).__name__}: {error}"
-            self.errors.error(type(error).__name__, f"segmentation failed: {self.last_error}")
+        if match is not None:
+            self.process(**dict(zip(self.inputs, match[1], strict=True)))
 
     def estimated_pose(self, frame, depth) -> PoseStamped:
         """Estimate (or reuse) T_world_camera for a decoded frame, publish it and fill the frame in."""
@@ -263,7 +240,6 @@ class SegmentationNode(Node):
             "goal_pauses": self.goals.pauses if self.goals else 0,
             "paused_for_goal": bool(self.goals and self.goals.seconds_left() > 0),
             "messages_skipped_for_goals": self.messages_skipped_for_goals,
-            "sets_replaced": self.sets_replaced,
         }
         array = diagnostics_msg(self, "segmentation", values, level, message)
         if self.tracker is not None:
@@ -292,10 +268,6 @@ class SegmentationNode(Node):
             "last_error": stats.last_error,
         }
         return diagnostics_msg(self, "camera_pose_estimate", values, level, message).status[0]
-
-    def close(self) -> None:
-        """Stop the worker (a frame still being segmented after 5 s is abandoned)."""
-        self.worker.close(timeout_s=5.0)
 
 
 def main(args=None) -> int:
