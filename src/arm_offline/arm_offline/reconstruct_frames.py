@@ -25,7 +25,14 @@ from arm_core.atomic_io import atomic_write_json
 from arm_core.distortion import DistortionError, Undistorter
 from arm_core.frames import FrameInputError
 from arm_offline import inputs
-from arm_offline.export import MESH_FORMATS, SceneError, scene_mjcf, write_object_meshes
+from arm_offline.export import (
+    MESH_FORMATS,
+    ExportedObject,
+    SceneError,
+    exported_objects,
+    scene_mjcf,
+    write_object_meshes,
+)
 from arm_offline.inputs import (
     POSES_FILE,
     Camera,
@@ -83,10 +90,11 @@ def table_support(objects: list[ReconstructedObject], levels: list[SupportLevel]
     return main_table_height(objects), None
 
 
-def object_entry(obj: ReconstructedObject, labels: np.ndarray, files: dict, body: str | None) -> dict:
-    entry = {"id": obj.id, "ok": obj.ok, "error": obj.error, "pixels": int(np.count_nonzero(labels == obj.id))}
-    if obj.ok:
-        mesh = obj.world_mesh()
+def object_entry(obj: ReconstructedObject, pixels: int, exported: ExportedObject | None, files: dict, body) -> dict:
+    """The object's entry in result.json (pixels: its count in the label image)."""
+    entry = {"id": obj.id, "ok": obj.ok, "error": obj.error, "pixels": pixels}
+    if exported is not None:
+        mesh = exported.world_mesh
         entry |= files | {
             "body": body,
             "centre_world_m": [round(float(v), 5) for v in obj.T_world_object[:3, 3]],
@@ -171,12 +179,18 @@ class FrameReconstructor:
         cv2.imwrite(str(folder / OVERLAY_FILE), overlay(rgb, labels)[..., ::-1])
         cv2.imwrite(str(folder / LABELS_FILE), labels.astype(np.uint16))
         table_height_m, support_xy = table_support(objects, segmentation.levels)
-        xml, bodies = scene_mjcf(objects, rgb, labels, segmentation.table_mask, table_height_m, support_xy, name)
+        exported = {e.obj.id: e for e in exported_objects(objects)}
+        xml, bodies = scene_mjcf(
+            list(exported.values()), rgb, labels, segmentation.table_mask, table_height_m, support_xy, name
+        )
         (folder / SCENE_FILE).write_text(xml)
+        pixels = np.bincount(labels.ravel(), minlength=int(labels.max()) + 1)
         entries = []
         for obj in objects:
-            files = write_object_meshes(obj, folder, self.settings.mesh_format) if obj.ok else {}
-            entries.append(object_entry(obj, labels, files, bodies.get(obj.id)))
+            done = exported.get(obj.id)
+            files = write_object_meshes(done, folder, self.settings.mesh_format) if done is not None else {}
+            count = int(pixels[obj.id]) if 0 <= obj.id < len(pixels) else 0
+            entries.append(object_entry(obj, count, done, files, bodies.get(obj.id)))
         return {
             "table_height_m": round(table_height_m, 5),
             "n_segmented": len(objects),
