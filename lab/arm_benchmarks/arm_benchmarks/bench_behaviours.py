@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 import arm_core.repeated_runs
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.stats import json_safe, wilson_interval
 
 DEFAULT_TESTS = ("src/arm_planner/test/test_planner.py", "lab/arm_benchmarks/test/test_world_execution.py")
@@ -105,6 +106,8 @@ def write_report(summary: dict, path: pathlib.Path) -> None:
         f"{arm_core.repeated_runs.NEEDED} of up to {arm_core.repeated_runs.RUNS} runs; 'suite fails' is the chance "
         "that it does not, from the measured rate.",
         "",
+        f"Machine: {summary.get('machine', 'not recorded')}.",
+        "",
         "| behaviour | held | rate (90 % interval) | suite fails |",
         "|---|---|---|---|",
     ]
@@ -145,6 +148,7 @@ def main(argv=None) -> int:
     rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
     rows = [r for r in rows if len(r["held"]) == args.runs]
     summary = summarise(rows, args.runs) | {"pytest_exit_code": int(code), "tests": args.tests}
+    summary["machine"] = machine_description()
     (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2) + "\n")
     write_report(summary, out / "report.md")
     print(f"[bench_behaviours] wrote {out / 'summary.json'} and {out / 'report.md'}")

@@ -13,13 +13,13 @@ import argparse
 import json
 import os
 import pathlib
-import platform
 import time
 
 import matplotlib
 import numpy as np
 from tqdm import tqdm
 
+from arm_benchmarks.machine import machine_description
 from arm_segmentation.camera_pose_estimate import CameraPoseError, estimate_camera_pose
 from arm_sim.appearance import DEFAULT_DOMAIN, DOMAINS
 from arm_sim.objects import object_pool
@@ -113,7 +113,7 @@ def summarize(rows: list[dict], args) -> dict:
         "objects_per_scene": [args.min_objects, args.max_objects],
         "depth_noise": not args.no_noise,
         "domain": args.domain,
-        "machine": f"{platform.machine()} {platform.processor() or 'cpu'}, python {platform.python_version()}",
+        "machine": machine_description(),
         "cpu_count": os.cpu_count(),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }

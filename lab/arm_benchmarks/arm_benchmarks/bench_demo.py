@@ -17,6 +17,7 @@ import time
 
 from tqdm import tqdm
 
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.stats import wilson_interval
 from arm_core.atomic_io import atomic_write_json, atomic_write_text
 
@@ -97,6 +98,7 @@ def main(argv=None) -> int:
         "done_interval_90": list(wilson_interval(done, len(rows))),
         "no_target": sum(r["outcome"] == "no target" for r in rows),
         "errors": sum(r["outcome"] == "error" for r in rows),
+        "machine": machine_description(),
         "rows": rows,
     }
     atomic_write_json(args.out / "summary.json", total, indent=1)
@@ -105,7 +107,7 @@ def main(argv=None) -> int:
         "",
         f"Done in the simulator: {done} of {len(rows)} (90 % interval {total['done_interval_90'][0]:.2f}-"
         f"{total['done_interval_90'][1]:.2f}); at the first attempt: {total['done_at_first_attempt']}; "
-        f"no suitable target: {total['no_target']}; errors: {total['errors']}.",
+        f"no suitable target: {total['no_target']}; errors: {total['errors']}. Machine: {total['machine']}.",
         "",
         "| seed | outcome | attempts | instances | target | met in the twin | target moved (m) | why |",
         "|---|---|---|---|---|---|---|---|",

@@ -40,6 +40,7 @@ from tqdm import tqdm
 
 from arm_benchmarks.bench_stats import BINS, bin_label, summarise, write_plots, write_report
 from arm_benchmarks.depth_tracking import DepthTracker
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.methods import GROUND_TRUTH, GROUND_TRUTH_ALIASES, benchmark_method
 from arm_benchmarks.run_key import run_key
 from arm_benchmarks.stats import json_safe, median
@@ -507,6 +508,7 @@ def main(argv=None) -> int:
     rows = [done[(e.index, m)] for e in episodes for m in args.methods if (e.index, m) in done]
     summary = summarise(rows, args.methods, run_tasks, BINS, len(episodes), args.robust_worlds)
     summary["settings"] = settings | {"run_key": key}
+    summary["machine"] = machine_description()
     (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
     write_plots(rows, summary, args.methods, BINS, out)
     write_report(summary, out)

@@ -9,8 +9,9 @@ import importlib
 import json
 import os
 import pathlib
-import platform
 import time
+
+from arm_benchmarks.machine import machine_description
 
 PERF_MEASUREMENTS = (
     ("arm_benchmarks.perf_sim", "measure"),
@@ -38,7 +39,7 @@ def main(argv=None) -> int:
     faulthandler.enable()  # a crash in native code leaves the Python stacks of every thread
     out = pathlib.Path(args.out)
     figures = {
-        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, python {platform.python_version()}",
+        "machine": machine_description(),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
     figures["cpu_count"] = os.cpu_count()

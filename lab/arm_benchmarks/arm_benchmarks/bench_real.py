@@ -25,7 +25,6 @@ A frame whose bench.json exists is not redone (resume), unless --overwrite.
 import argparse
 import json
 import pathlib
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -35,6 +34,7 @@ import mujoco
 import numpy as np
 from tqdm import tqdm
 
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.real.scene_physics import (
     STABLE_MOVE_M,
     STABLE_TURN_DEG,
@@ -372,7 +372,7 @@ def main(argv=None) -> int:
     frames = {folder.name: bench_set(folder, processor, args) for folder in args.folders}
     summary = {
         "command": "bench_real " + " ".join(sys.argv[1:] if argv is None else argv),
-        "machine": f"{platform.machine()} cpu, python {platform.python_version()}",
+        "machine": machine_description(),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "physics_s": args.physics_s,
         "noise_copies": args.noise_copies,

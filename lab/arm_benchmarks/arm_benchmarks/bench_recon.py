@@ -32,13 +32,13 @@ import argparse
 import json
 import os
 import pathlib
-import platform
 import sys
 import time
 
 import torch
 from tqdm import tqdm
 
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.methods import GROUND_TRUTH
 from arm_benchmarks.recon.cache import cached_scene, load_cases
 from arm_benchmarks.recon.config import ALL_METHODS, PIPELINE_FIELDS, BenchConfig
@@ -84,7 +84,7 @@ def run(config: BenchConfig, progress: bool = True) -> dict:
         "cpu_s": time.process_time() - started_cpu,
         "scenes_computed": computed,
         "cache": str(cache_dir),
-        "machine": platform.processor() or platform.machine(),
+        "machine": machine_description(),
         "cpu_count": os.cpu_count(),
         "load_average": os.getloadavg()[0],
         "command": "bench_recon " + " ".join(sys.argv[1:]),

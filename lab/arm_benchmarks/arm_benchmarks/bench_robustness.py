@@ -14,7 +14,6 @@ Writes <out>/summary.json, <out>/report.md and PNG plots (memory, lag, rates).
 
 import argparse
 import json
-import os
 import pathlib
 import shutil
 import sys
@@ -27,6 +26,7 @@ from sensor_msgs.msg import Image
 from tqdm import tqdm
 
 from arm_bags.bags import BagError, BagReader
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.robustness.bags import broken_bags, write_camera_bag
 from arm_benchmarks.robustness.cases.parameters import run_parameter_validation
 from arm_benchmarks.robustness.cases.planner import run_planner_bad_inputs
@@ -399,7 +399,7 @@ def main(argv=None) -> int:
             phases[name] = json.loads(saved.read_text())
     summary = {
         "command": "bench_robustness " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": f"{os.cpu_count()} CPU cores, {os.uname().machine}",
+        "machine": machine_description(),
         "reconstruction_checkpoint": str(reconstruction_checkpoint()),
         "figures": _figures(phases),
         "phases": phases,

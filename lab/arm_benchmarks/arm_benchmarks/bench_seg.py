@@ -20,7 +20,6 @@ import functools
 import json
 import os
 import pathlib
-import platform
 import time
 
 import matplotlib
@@ -28,6 +27,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from tqdm import tqdm
 
+from arm_benchmarks.machine import machine_description
 from arm_benchmarks.run_key import run_key
 from arm_benchmarks.stats import mean, median, percentile
 from arm_core.atomic_io import atomic_write
@@ -308,7 +308,7 @@ def main(argv=None) -> int:
         "seed": args.seed,
         "depth_noise": not args.no_noise,
         "domain": args.domain,
-        "machine": f"{platform.machine()} {platform.processor() or 'cpu'}, python {platform.python_version()}",
+        "machine": machine_description(),
         "cpu_count": os.cpu_count(),
         "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"),
         "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
