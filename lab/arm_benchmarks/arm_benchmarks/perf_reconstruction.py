@@ -187,7 +187,7 @@ def measure(
     n = len(grids.object_ids)
     meshes = [o.mesh for o in objects if o.ok]
     result = {
-        "machine": {
+        "process": {
             "cpu_count": os.cpu_count(),
             "torch_threads": torch.get_num_threads(),
             "load_average_1m_at_end": float(os.getloadavg()[0]),
@@ -250,7 +250,7 @@ def write_report(result: dict, out_dir="results/perf") -> None:
     figure.savefig(out / "reconstruction_stages.png", dpi=120)
     plt.close(figure)
 
-    m = result["machine"]
+    m = result["process"]
     height, width = result["scene"]["image"]
     lines = [
         "# Reconstruction inference performance",
