@@ -90,8 +90,11 @@ def table_support(objects: list[ReconstructedObject], levels: list[SupportLevel]
     return main_table_height(objects), None
 
 
-def object_entry(obj: ReconstructedObject, pixels: int, exported: ExportedObject | None, files: dict, body) -> dict:
-    """The object's entry in result.json (pixels: its count in the label image)."""
+def object_entry(
+    obj: ReconstructedObject, pixels: int, exported: ExportedObject | None, files: dict, body: str | None
+) -> dict:
+    """The object's entry in result.json (pixels: its count in the label image; exported: None when it
+    was not reconstructed)."""
     entry = {"id": obj.id, "ok": obj.ok, "error": obj.error, "pixels": pixels}
     if exported is not None:
         mesh = exported.world_mesh
