@@ -15,6 +15,7 @@ import trimesh
 
 from arm_core.camera import transform_points
 from arm_reconstruction.pipeline import ReconstructedObject
+from arm_segmentation.refine import instance_colours
 from arm_sim.objects import ObjectModel
 from arm_sim.scenes import PlacedObject, Scene
 from arm_sim.world import compile_without_overlap_contacts, object_body_name, world_spec
@@ -65,11 +66,11 @@ def simulation_parts(obj: ReconstructedObject) -> list[trimesh.Trimesh]:
 def mean_colours(rgb: np.ndarray, labels: np.ndarray, n_labels: int) -> np.ndarray:
     """(n_labels, 4) RGBA (0..1) of the mean colour of the pixels of each label 0..n_labels - 1 (grey
     where there are none), from one pass over the image."""
-    flat = labels.ravel()
-    count = np.bincount(flat, minlength=n_labels)[:n_labels].astype(np.float64)
-    sums = [np.bincount(flat, weights=rgb[..., c].ravel(), minlength=n_labels)[:n_labels] for c in range(3)]
-    mean = np.where(count[:, None] > 0, np.stack(sums, axis=1) / np.maximum(count, 1.0)[:, None] / 255.0, 0.6)
-    return np.column_stack([mean, np.ones(n_labels)])
+    present = np.bincount(labels.ravel(), minlength=n_labels)[:n_labels] > 0
+    means = np.zeros((n_labels, 3))
+    found = instance_colours(labels, rgb)[:n_labels]
+    means[: len(found)] = found
+    return np.column_stack([np.where(present[:, None], means / 255.0, 0.6), np.ones(n_labels)])
 
 
 def table_half_extent_m(objects: list[ExportedObject], support_xy: np.ndarray | None) -> tuple[float, float]:
