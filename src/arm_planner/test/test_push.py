@@ -285,3 +285,19 @@ def test_the_footprint_turns_with_the_object():
     quarter_turn = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
     assert reward._footprint_distance(hand, centre, np.eye(3)[None])[0] == pytest.approx(0.04, abs=0.003)
     assert reward._footprint_distance(hand, centre, quarter_turn)[0] == pytest.approx(0.0, abs=0.003)
+
+
+def test_one_finger_backs_off_when_it_slips_round_to_the_objects_side():
+    """A finger beside the object presses on its side face and pushes it off the line, though it is still
+    near its contact point: it goes back to approaching, to come in behind the object again."""
+    reward = _one_finger_on((0.05, 0.04, 0.06))
+    com = reward.geometry.com_world
+    contact = reward._contact_point(com[None], np.eye(3)[None])[0]
+    reward.update(np.concatenate([contact, com]))
+    assert reward.state == "pushing"
+    reward.update(np.concatenate([contact + [0.0, 0.8 * reward.lane_half_width_m, 0.0], com]))
+    assert reward.state == "pushing", "a little off the line, still behind it"
+    beside = contact + [0.015, reward.lane_half_width_m + 0.005, 0.0]
+    assert np.linalg.norm(beside - contact) < reward.disengage_distance_m
+    reward.update(np.concatenate([beside, com]))
+    assert reward.state == "approaching"

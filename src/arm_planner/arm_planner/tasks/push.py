@@ -35,6 +35,8 @@ class PushReward(TaskReward):
     # footprint, outside the lane behind the contact point (at most lane_half_width_m + its distance
     # behind to the side of the push line): it comes down behind the object and slides in, rather
     # than sweeping its fingers or palm through a tall object on the way. near_object_m 0: off.
+    # While pushing, a hand more than lane_half_width_m to the side of that line is beside the object
+    # (update(): it backs off and approaches again).
     over_top_m: float = 0.02
     finger_margin_m: float = 0.012
     near_object_m: float = 0.1
@@ -249,12 +251,21 @@ class PushReward(TaskReward):
         hand_pos, _, target_pos, target_rot = self.poses(state[None])
         return float(np.linalg.norm(hand_pos[0] - self._contact_point(target_pos, target_rot)[0]))
 
+    def _beside_object(self, state: np.ndarray) -> bool:
+        """Whether the hand, at an executed state, is further than lane_half_width_m to the side of the
+        push line through its contact point: there it presses on the object's side and pushes it off
+        the line (a hand that slipped round a corner), so it backs off and comes in behind again."""
+        hand_pos, _, target_pos, target_rot = self.poses(state[None])
+        direction = self._direction(target_pos)[0]
+        from_contact = hand_pos[0, :2] - self._contact_point(target_pos, target_rot)[0, :2]
+        return abs(from_contact[0] * direction[1] - from_contact[1] * direction[0]) > self.lane_half_width_m
+
     def update(self, state: np.ndarray) -> str:
         distance = self._engage_distance(state)
         self.step_count += 1
         if self.state == "approaching" and distance < self.engage_distance_m:
             self.state = "pushing"
-        elif self.state == "pushing" and distance > self.disengage_distance_m:
+        elif self.state == "pushing" and (distance > self.disengage_distance_m or self._beside_object(state)):
             self.state = "approaching"
         self.near_contact = self.state == "pushing" or distance < self.disengage_distance_m
         return self.state
@@ -386,6 +397,10 @@ class CagePushReward(PushReward):
     def _engage_distance(self, state: np.ndarray) -> float:
         hand_pos, _, target_pos, _ = self.poses(state[None])
         return float(np.linalg.norm(hand_pos[0] - (target_pos[0] + self.cage_offset)))
+
+    def _beside_object(self, state: np.ndarray) -> bool:
+        """Never: the open fingers straddle the object (out_of_cage tells when it slipped out)."""
+        return False
 
     def out_of_cage(self, state: np.ndarray) -> bool:
         """Whether the object's centre lies behind the rear finger (by out_of_cage_m) at an executed
