@@ -245,7 +245,7 @@ def run_method(
             row["target_stability_m"] = target_stability_m(session, target_index + 1, objects, scene.table_height_m)
         if outcome.planned and robust_worlds > 0:
             if period_steps > 0:
-                row["robust"] = closed_loop_robust(
+                row["robust"], row["robust_notes"] = closed_loop_robust(
                     objects,
                     scene,
                     target_index,
@@ -279,10 +279,11 @@ def perturbation_draws(scene, worlds: int, seed: int):
 
 def closed_loop_robust(
     objects, scene, target_index, frame, task, config, twin_timestep_s, period_steps, tracker, worlds: int, seed: int
-) -> list[bool]:
-    """Whether the method, planning again from its own twin of the view and executing closed loop,
-    meets the task in each of `worlds` perturbed worlds."""
-    met = []
+) -> tuple[list[bool], list[str]]:
+    """(whether the method, planning again from its own twin of the view and executing closed loop,
+    meets the task in each of `worlds` perturbed worlds; per world, the plan's message and the
+    target's final error in the world)."""
+    met, notes = [], []
     for sample in perturbation_draws(scene, worlds, seed):
         session = ManipulationSession(config, twin_timestep_s)
         world = perturbed_world(scene, sample)
@@ -290,10 +291,12 @@ def closed_loop_robust(
             reobserve = reobservation(tracker, objects, frame, seed)
             run = run_task(session, world, objects, scene, target_index, task, period_steps, reobserve, sample)
             met.append(bool(run.outcome.planned and run.success))
+            error = f"; world error {run.error_m:.3f} m" if run.outcome.planned else ""
+            notes.append(f"{run.outcome.message}{error}")
         finally:
             session.close()
             world.close()
-    return met
+    return met, notes
 
 
 def replayed_robust(scene, target_index: int, task: str, result, worlds: int, seed: int) -> list[bool]:
