@@ -40,9 +40,6 @@ class ClusterParams:
     depth_jump_per_m: float = 0.012
     concave_threshold: float = 0.35
     crease_reach: int = 3  # creases are also looked for between pixels this many steps apart (a sensor rounds them)
-    # concave_threshold of that wider test: over its longer span a depth sensor's noisy normals on a curved
-    # surface (a bowl's or a mug's inside) turn as far as a crease's do over one step
-    crease_reach_threshold: float = 0.6
     use_colour: bool = setting(True, "Use colour cues (false: geometry only)")
     chroma_edge_threshold: float = 0.15
     merge_chroma_threshold: float = 0.16
@@ -132,7 +129,7 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
         geometric[b] |= cut & mask[a] & mask[b]
         if params.crease_reach > 1:  # a crease the sensor rounded over several steps: both ends marked
             wide_a, wide_b = _shifted((shift[0] * params.crease_reach, shift[1] * params.crease_reach))
-            wide = _concave(points_camera, normals_camera, normal_valid, wide_a, wide_b, params.crease_reach_threshold)
+            wide = _concave(points_camera, normals_camera, normal_valid, wide_a, wide_b, params.concave_threshold)
             wide &= mask[wide_a] & mask[wide_b]
             for end in (wide_a, wide_b):
                 geometric[end] |= wide
