@@ -70,9 +70,10 @@ class GraspReward(TaskReward):
     lift_timeout_steps: int = 100
     place_within_m: float = 0.02
     # Rearrange, while grasped: the hand's tilt from pointing down costs nothing up to this (radians);
-    # beyond it, the angle weight per radian (tilted 60-100 degrees, the object swings out of the
-    # fingers; penalised from 0, the planner gave up the goal near joint limits to stay upright).
-    carry_free_tilt_rad: float = float(np.radians(30.0))
+    # beyond it, the angle weight per radian. Tilted 60-100 degrees, the object swings out of the
+    # fingers; tilted 20-30, it turns in the grip and is set down leaning; penalised from 0, the
+    # planner gave up the goal near joint limits to stay upright.
+    carry_free_tilt_rad: float = float(np.radians(15.0))
     # Rearrange: the open fingers' inner gap (m; 0: unknown). When the object's extent along the carry
     # direction plus `carry_closing_margin_m` each side fits it, the fingers close along the carry
     # direction rather than across the object's narrowest extent: accelerating along the closing axis,
