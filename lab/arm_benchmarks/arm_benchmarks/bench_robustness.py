@@ -40,8 +40,9 @@ from arm_benchmarks.robustness.messages import camera_messages
 from arm_benchmarks.robustness.nodes import ROOT, reconstruction_checkpoint, reconstruction_params
 from arm_benchmarks.robustness.parameters import convention_report
 from arm_benchmarks.robustness.probe import Probe
-from arm_ros.common import sensor_qos, use_private_domain
+from arm_ros.common import sensor_qos, use_large_socket_buffers, use_private_domain
 from arm_ros.processes import NodeProcess, node_built
+from arm_segmentation.node_config import SegmentationNodeConfig
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
@@ -204,7 +205,9 @@ def phase_load_fault(args, work: pathlib.Path) -> dict:
         return {"skipped": "no reconstruction checkpoint"}
     bag = work / "camera_bag"
     write_camera_bag(bag, render_frames(6, args.width, args.height, seed=3, count=3), args.camera_hz)
-    graph = start_graph(work, bag, params, planner_params={**FAST_PLANNER, "execution": "plan_only"})
+    graph = start_graph(
+        work, bag, params, args.image_reliability, planner_params={**FAST_PLANNER, "execution": "plan_only"}
+    )
     probe = Probe()
     bar = tqdm(total=int(args.duration_s), desc="load", unit="s", leave=False)
     try:
@@ -368,9 +371,16 @@ def main(argv=None) -> int:
     parser.add_argument("--width", type=int, default=640)
     parser.add_argument("--height", type=int, default=480)
     parser.add_argument("--only", nargs="*", choices=PHASES, default=list(PHASES))
+    parser.add_argument(
+        "--image-reliability",
+        choices=("best_effort", "reliable"),
+        default=SegmentationNodeConfig().image_reliability,
+        help="load_fault: segmentation_node's image subscriptions (default: the node's)",
+    )
     parser.add_argument("--resume", action="store_true", help="keep phases already saved under <out>/phases")
     args = parser.parse_args(argv)
     use_private_domain()
+    use_large_socket_buffers()  # the probes' process transports as the nodes' do
     missing = [k for k in ("sim", "segmentation", "reconstruction", "planner", "replay") if not node_built(k)]
     if missing:
         print(f"[bench_robustness] not built: {missing} (colcon build)")

@@ -40,7 +40,14 @@ from arm_bags.bags import (
     message_class,
     shift_stamps,
 )
-from arm_ros.common import RateLimitedErrors, declare, diagnostics_msg, exit_refused, spin_until_shutdown
+from arm_ros.common import (
+    RateLimitedErrors,
+    declare,
+    diagnostics_msg,
+    exit_refused,
+    spin_until_shutdown,
+    use_large_socket_buffers,
+)
 from arm_ros.conversions.stamps import ns_to_time
 
 FRAME_TOPICS = [
@@ -300,6 +307,7 @@ def main(args=None) -> int:
     if len(argv) > 1 or (argv and argv[0].startswith("-")):
         print("usage: replay BAG [--ros-args -p mode:=original|consumed -p rate:=1.0 -p loop:=true ...]")
         return 2
+    use_large_socket_buffers()
     rclpy.init(args=args)  # rclpy's SIGINT/SIGTERM handlers shut the context down: play() then returns
     node = executor = spinner = None
     code = refused = 0

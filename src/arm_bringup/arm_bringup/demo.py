@@ -21,6 +21,7 @@ from arm_bringup.observer import Observer
 from arm_bringup.plots import plot_before_after, plot_camera_segmentation, plot_reconstruction_vs_truth
 from arm_bringup.scenes import reconstruction_errors
 from arm_bringup.task import run_task
+from arm_ros.common import use_large_socket_buffers
 from arm_ros.conversions.images import K_from_camera_info, image_to_numpy
 from arm_ros.conversions.poses import pose_to_matrix
 
@@ -131,6 +132,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     summary = {"seed": args.seed, "stages": {}}
     t_start = time.monotonic()
+    use_large_socket_buffers()  # for this process and the graph's, which inherit its environment
     rclpy.init()
     node = rclpy.create_node("arm_demo")
     observer = Observer(node)

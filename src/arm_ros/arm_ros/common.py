@@ -28,6 +28,29 @@ def use_private_domain() -> int:
     return int(os.environ["ROS_DOMAIN_ID"])
 
 
+# Fast DDS's socket buffers for the nodes' processes, bytes: room for two 640x480 colour + depth
+# frames (2.1 MB each). A best-effort image is fragmented over UDP, and one fragment the socket cannot
+# hold loses the whole image: with the system's default 208 KB, a niced node that fell behind its
+# socket received 40-45 % of the images of a 30 Hz camera (docs/experiments.md). The kernel caps the
+# size at net.core.rmem_max.
+DDS_SOCKET_BUFFER_BYTES = 4 * 1024 * 1024
+
+
+def use_large_socket_buffers() -> str | None:
+    """Before rclpy.init: Fast DDS's built-in transports set to UDP with DDS_SOCKET_BUFFER_BYTES socket
+    buffers (FASTDDS_BUILTIN_TRANSPORTS), unless another RMW, an XML profile or transport options are
+    given; a mode already named (UDPv4, DEFAULT, ...) keeps its name. Returns the setting made, or None."""
+    if os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+        return None
+    if os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"):
+        return None
+    mode = os.environ.get("FASTDDS_BUILTIN_TRANSPORTS", "") or "UDPv4"
+    if "?" in mode:
+        return None
+    os.environ["FASTDDS_BUILTIN_TRANSPORTS"] = f"{mode}?sockets_size={DDS_SOCKET_BUFFER_BYTES}"
+    return os.environ["FASTDDS_BUILTIN_TRANSPORTS"]
+
+
 def sensor_qos(reliability: str = "best_effort", depth: int = 2) -> QoSProfile:
     """The sensor-data profile (keep-last, volatile) with a configurable reliability."""
     if reliability not in ("best_effort", "reliable"):
@@ -159,6 +182,7 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     or take in flight end the process cleanly (exit code 0). A fatal signal (a crash in native code)
     writes every thread's Python stack to stderr, the node's log, before the process dies."""
     faulthandler.enable()
+    use_large_socket_buffers()
     rclpy.init(args=args)
     node = None
     code = 0
