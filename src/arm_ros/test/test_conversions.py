@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
@@ -23,7 +24,7 @@ from arm_ros.conversions.meshes import (
     reconstructed_object_msg,
 )
 from arm_ros.conversions.poses import matrix_to_pose, pose_to_matrix
-from arm_ros.conversions.stamps import ns_to_time, seconds_to_duration, time_ns
+from arm_ros.conversions.stamps import cdr_header_stamp_ns, ns_to_time, seconds_to_duration, time_ns
 
 
 def test_images_round_trip():
@@ -168,3 +169,17 @@ def test_durations_round_to_whole_nanoseconds():
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="finite and >= 0"):
             seconds_to_duration(bad)
+
+
+@pytest.mark.parametrize("message_type", [Image, CameraInfo, PoseStamped])
+def test_header_stamps_are_read_from_serialized_messages(message_type):
+    msg = message_type()
+    msg.header = Header(stamp=ns_to_time(1_764_000_000_123_456_789), frame_id="camera_optical")
+    assert cdr_header_stamp_ns(serialize_message(msg)) == 1_764_000_000_123_456_789
+
+
+def test_big_endian_cdr_stamps_are_read_and_other_bytes_are_refused():
+    big_endian = b"\x00\x00\x00\x00" + (12).to_bytes(4, "big") + (5).to_bytes(4, "big") + b"\x00" * 8
+    assert cdr_header_stamp_ns(big_endian) == 12_000_000_005
+    assert cdr_header_stamp_ns(b"\x00\x01\x00\x00\x01") is None  # too short
+    assert cdr_header_stamp_ns(b"\x00\x07\x00\x00" + b"\x00" * 12) is None  # another encapsulation

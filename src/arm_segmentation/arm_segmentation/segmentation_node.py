@@ -20,6 +20,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState, PointCloud2
 
 from arm_interfaces.msg import SegmentedFrame
@@ -32,6 +33,7 @@ from arm_ros.common import (
     sensor_qos,
 )
 from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
+from arm_ros.conversions.stamps import cdr_header_stamp_ns, time_ns
 from arm_ros.goal_activity import goal_pause
 from arm_ros.tf import TfPublisher, tf_listener
 from arm_segmentation.boundary_net import shared_predictor
@@ -51,6 +53,8 @@ TOPICS = {
     "pose": (PoseStamped, "camera/pose"),
     "labels": (Image, "sim/ground_truth/labels"),
 }
+# Messages each input's reader keeps (see __init__).
+INPUT_HISTORY = 3
 ESTIMATED_WORLD_FRAME = "table"  # the estimate's frame: z up, table top z = 0, origin under the camera
 
 
@@ -90,10 +94,14 @@ class SegmentationNode(Node):
         self.sync = ApproximateTimeSynchronizer(len(self.inputs), slop_s, config.sync_queue_size)
         self.errors = RateLimitedErrors(self.get_logger())
         self._start_self_filter(config)
-        qos = sensor_qos(config.image_reliability, depth=1)
+        # Each input is taken as serialized bytes (its stamp read from them) and only the set the
+        # synchronizer matches is deserialized; each reader keeps the newest INPUT_HISTORY messages, so
+        # that the set of one camera frame is still there when a frame has been segmented, whatever
+        # order and spread its messages arrived in.
+        qos = sensor_qos(config.image_reliability, depth=INPUT_HISTORY)
         for index, name in enumerate(self.inputs):
             msg_type, topic = TOPICS[name]
-            self.create_subscription(msg_type, topic, lambda msg, i=index: self.on_message(i, msg), qos)
+            self.create_subscription(msg_type, topic, lambda raw, i=index: self.on_message(i, raw), qos, raw=True)
         self.pub_estimated_pose = self.create_publisher(PoseStamped, "camera/pose/estimated", 10)
         # Reliable, but only the newest frames are kept for a reader that has not acknowledged them: each
         # is about 2.8 MB (640x480), and a history of 10 grew the node by about 25 MB when the
@@ -148,17 +156,37 @@ class SegmentationNode(Node):
             self.self_filter_params,
         )  # fmt: skip
 
-    def on_message(self, index: int, msg) -> None:
+    def on_message(self, index: int, raw: bytes) -> None:
+        """One serialized input message: matched by its header stamp, deserialized with its set."""
         if self.goals is not None and self.goals.seconds_left() > 0:
             self.messages_skipped_for_goals += 1
             return
-        stamp = stamp_s(msg)
-        if not (stamp == stamp and abs(stamp) < 1e12):
+        stamp_ns = cdr_header_stamp_ns(raw)
+        item = raw
+        if stamp_ns is None:  # not plain CDR: the message itself gives its stamp
+            item = self.deserialize(index, raw)
+            if item is None:
+                return
+            stamp_ns = time_ns(item.header.stamp)
+        stamp = 1e-9 * stamp_ns
+        if not abs(stamp) < 1e12:
             self.errors.error("bad_stamp", f"{self.inputs[index]} message has an invalid stamp")
             return
-        match = self.sync.add(index, stamp, msg)
-        if match is not None:
-            self.process(**dict(zip(self.inputs, match[1], strict=True)))
+        match = self.sync.add(index, stamp, item)
+        if match is None:
+            return
+        messages = [self.deserialize(i, m) if isinstance(m, bytes) else m for i, m in enumerate(match[1])]
+        if all(m is not None for m in messages):
+            self.process(**dict(zip(self.inputs, messages, strict=True)))
+
+    def deserialize(self, index: int, raw: bytes):
+        """The input's message from its serialized bytes, or None (logged) when they do not decode."""
+        msg_type, topic = TOPICS[self.inputs[index]]
+        try:
+            return deserialize_message(raw, msg_type)
+        except Exception as error:  # whatever the bytes, the node goes on
+            self.errors.error("undecodable", f"{topic}: a message that does not decode as {msg_type.__name__}: {error}")
+            return None
 
     def estimated_pose(self, frame, depth) -> PoseStamped:
         """Estimate (or reuse) T_world_camera for a decoded frame, publish it and fill the frame in."""

@@ -23,3 +23,15 @@ def seconds_to_duration(seconds: float) -> Duration:
         raise ValueError(f"duration must be finite and >= 0 s, got {seconds}")
     ns = int(round(seconds * 1e9))
     return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def cdr_header_stamp_ns(serialized: bytes) -> int | None:
+    """The header stamp (integer nanoseconds) of a serialized message whose first field is a
+    std_msgs/Header, read from its CDR bytes without deserializing the rest (an image is about 1 MB);
+    None when the bytes are too short or not plain CDR (encapsulation 0x0000 big or 0x0001 little
+    endian), where the caller deserializes the message instead."""
+    if len(serialized) < 12 or serialized[0] != 0 or serialized[1] not in (0, 1) or serialized[2:4] != b"\0\0":
+        return None
+    order = "little" if serialized[1] == 1 else "big"
+    sec = int.from_bytes(serialized[4:8], order, signed=True)
+    return sec * 1_000_000_000 + int.from_bytes(serialized[8:12], order)
