@@ -31,8 +31,8 @@ def use_private_domain() -> int:
 # Fast DDS's socket buffers for the nodes' processes, bytes: room for two 640x480 colour + depth
 # frames (2.1 MB each). A best-effort image is fragmented over UDP, and one fragment the socket cannot
 # hold loses the whole image: with the system's default 208 KB, a niced node that fell behind its
-# socket received 40-45 % of the images of a 30 Hz camera (docs/experiments.md). The kernel caps the
-# size at net.core.rmem_max.
+# socket received about a third of the depth images of a 30 Hz camera (docs/experiments.md). The
+# kernel caps the size at net.core.rmem_max.
 DDS_SOCKET_BUFFER_BYTES = 4 * 1024 * 1024
 
 
