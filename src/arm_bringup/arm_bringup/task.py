@@ -27,8 +27,9 @@ from arm_sim.world import ROBOT_BASE_XY
 
 # Side room a grasp leaves between the object and each finger, metres.
 GRASP_SIDE_ROOM_M = 0.005
-# Candidates, most visible first, planned without executing before one is chosen.
-DRY_RUNS = 5
+# Candidates, most visible first, planned without executing before one is chosen (a dry run takes
+# about 3 s; in the demo's scenes about half meet the task in the twin).
+DRY_RUNS = 10
 # Attempts at a grasp: one the robot finds holds nothing (grasp_held) is tried again on a new view.
 ATTEMPTS = 3
 # A finger closed to this or less (m) holds nothing (a lamp held by its 3 mm stem reads 1.6 mm).
