@@ -6,7 +6,7 @@ same region pair with more evidence: colour and brightness of both sides and how
 how they touch (continuous, across a depth jump, without depth, on one smooth surface), the boundary
 network's outline probability along the contact, the regions' areas, heights above the support and
 mean normals. It is trained on the training categories' scenes with oracle merging (`seg_merge_train`)
-and runs in numpy (a two-layer perceptron, weights in checkpoints/merge.npz).
+and runs in numpy (an ensemble of two-layer perceptrons, weights in checkpoints/merge.npz).
 
 Region statistics are additive per pixel (`pixel_statistics`), so merged regions' statistics are
 sums of their fragments'; heights are a minimum and a maximum.

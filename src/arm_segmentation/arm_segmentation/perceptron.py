@@ -2,8 +2,9 @@
 
 The segmentation's learned decisions (merge_model: two regions are one object; outline_model: a
 pixel at an outline belongs to the object) are two-hidden-layer perceptrons over standardised
-features. Weights live in .npz files with the feature names they were trained on, and a model card
-(.md) beside them.
+features, or ensembles of such perceptrons that average their logits (each layer's weights stacked
+member by member: (members, in, out)). Weights live in .npz files with the feature names they were
+trained on, and a model card (.md) beside them.
 """
 
 from __future__ import annotations
@@ -24,16 +25,19 @@ ROWS_PER_PRODUCT = 256
 
 def perceptron_probability(features, mean, scale, layers) -> np.ndarray:
     """(P,) sigmoid output of the perceptron `layers` [(weights, bias), ...] (ReLU between them) on
-    features standardised by mean and scale."""
+    features standardised by mean and scale. Weights (in, out) with bias (out,) are one perceptron;
+    (members, in, out) with (members, out) an ensemble, whose output is its members' mean logit."""
     x = (np.asarray(features, dtype=np.float32) - mean) / scale
     out = np.empty(len(x), dtype=np.float32)
     for start in range(0, len(x), ROWS_PER_PRODUCT):
         h = x[start : start + ROWS_PER_PRODUCT]
         for k, (w, b) in enumerate(layers):
-            h = h @ w + b
+            h = h @ w + b[..., None, :]  # an ensemble's members: one small product each
             if k < len(layers) - 1:
                 h = np.maximum(h, 0.0)
-        out[start : start + len(h)] = h[:, 0]
+        logit = h[..., 0]
+        logit = logit.mean(axis=0) if logit.ndim == 2 else logit
+        out[start : start + len(logit)] = logit
     return 1.0 / (1.0 + np.exp(-np.clip(out, -30.0, 30.0)))
 
 
@@ -91,6 +95,19 @@ def fit_perceptron(features, target, weight, hidden: int, steps: int, seed: int,
     linear = [m for m in model if isinstance(m, torch.nn.Linear)]
     layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()) for m in linear]
     return mean.astype(np.float32), scale.astype(np.float32), layers
+
+
+def stack_perceptrons(layer_sets) -> list:
+    """The ensemble (see perceptron_probability) of the perceptrons `layer_sets`
+    [[(weights, bias), ...], ...], which must have the same layer shapes and share one
+    standardisation of the features."""
+    shapes = [[w.shape for w, _ in layers] for layers in layer_sets]
+    if any(s != shapes[0] for s in shapes):
+        raise ValueError(f"stack_perceptrons: the perceptrons differ in layer shapes: {shapes}")
+    return [
+        (np.stack([ls[k][0] for ls in layer_sets]), np.stack([ls[k][1] for ls in layer_sets]))
+        for k in range(len(shapes[0]))
+    ]
 
 
 def save_perceptron(path: pathlib.Path, feature_names, mean, scale, layers, title: str, card: dict) -> None:

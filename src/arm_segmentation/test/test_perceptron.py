@@ -3,7 +3,7 @@ import pytest
 
 from arm_segmentation.merge_model import MergeClassifier, MergeParams, shared_classifier
 from arm_segmentation.outline_model import OutlineClassifier, OutlineParams, shared_outline_classifier
-from arm_segmentation.perceptron import ROWS_PER_PRODUCT, perceptron_probability
+from arm_segmentation.perceptron import ROWS_PER_PRODUCT, perceptron_probability, stack_perceptrons
 
 CLASSIFIERS = [
     (MergeClassifier, MergeParams, shared_classifier, "merge classifier"),
@@ -31,3 +31,22 @@ def test_probability_in_blocks_equals_one_product():
     mean, scale = np.zeros(5, np.float32), np.ones(5, np.float32)
     assert np.allclose(perceptron_probability(features, mean, scale, layers), expected, atol=1e-6)
     assert perceptron_probability(features[:0], mean, scale, layers).shape == (0,)
+
+
+def test_a_stack_outputs_the_mean_logit_of_its_members():
+    rng = np.random.default_rng(1)
+
+    def member(width):
+        shapes = [(5, width), (width, width), (width, 1)]
+        return [(0.3 * rng.normal(size=s), 0.3 * rng.normal(size=s[1])) for s in shapes]
+
+    members = [member(4), member(4), member(4)]
+    features = rng.normal(size=(40, 5)).astype(np.float32)
+    mean, scale = np.zeros(5, np.float32), np.ones(5, np.float32)
+    logits = [np.log(p / (1 - p)) for p in (perceptron_probability(features, mean, scale, m) for m in members)]
+    expected = 1.0 / (1.0 + np.exp(-np.mean(logits, axis=0)))
+    stacked = stack_perceptrons(members)
+    assert [w.shape for w, _ in stacked] == [(3, 5, 4), (3, 4, 4), (3, 4, 1)]
+    assert np.allclose(perceptron_probability(features, mean, scale, stacked), expected, atol=1e-5)
+    with pytest.raises(ValueError, match="layer shapes"):
+        stack_perceptrons([members[0], member(6)])

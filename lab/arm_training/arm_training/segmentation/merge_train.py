@@ -7,8 +7,9 @@
    objects, with whether they are the same one, and merges those that are. Stored in
    <data>/<split>/shard_<seed>.npz; shards that exist are skipped, so a run resumes.
 2. Training: a two-layer perceptron (torch, Adam, pairs weighted by the square root of the smaller
-   region's pixels) on the train split; accuracy on the test split; weights, feature standardisation
-   and a model card (merge.md) to the checkpoint folder.
+   region's pixels) on the train split, or --ensemble such fits (seeds --seed ..) stacked into one
+   perceptron that averages their logits; accuracy on the test split; weights, feature
+   standardisation and a model card (merge.md) to the checkpoint folder.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 
 from arm_core.atomic_io import atomic_write
 from arm_segmentation.merge_model import DEFAULT_CHECKPOINT, FEATURE_NAMES, LearnedMerge, MergeClassifier
-from arm_segmentation.perceptron import fit_perceptron, perceptron_probability, save_perceptron
+from arm_segmentation.perceptron import fit_perceptron, perceptron_probability, save_perceptron, stack_perceptrons
 from arm_training.segmentation.shards import run_jobs, shard_path
 
 DEFAULT_DATA = pathlib.Path("data/seg_merge")
@@ -163,6 +164,8 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=1, help="parallel processes for the shards")
     parser.add_argument("--hidden", type=int, default=32)
     parser.add_argument("--steps", type=int, default=1500)
+    parser.add_argument("--batch", type=int, default=0, help="pairs per training step (0: all pairs)")
+    parser.add_argument("--ensemble", type=int, default=1, help="fits (seeds --seed ..) averaged in one perceptron")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--policy", default="", help="also make and train on shards merged by these weights")
     parser.add_argument(
@@ -170,8 +173,10 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--out", default=str(DEFAULT_CHECKPOINT), help="weights file (.npz)")
     args = parser.parse_args(argv)
-    if min(args.train_shards, args.views, args.workers, args.hidden, args.steps) < 1 or args.test_shards < 0:
-        parser.error("--train-shards, --views, --workers, --hidden and --steps must be >= 1")
+    if min(args.train_shards, args.views, args.workers, args.hidden, args.steps, args.ensemble) < 1:
+        parser.error("--train-shards, --views, --workers, --hidden, --steps and --ensemble must be >= 1")
+    if args.test_shards < 0 or args.batch < 0:
+        parser.error("--test-shards and --batch must be >= 0")
     if args.policy and not pathlib.Path(args.policy).is_file():
         parser.error(f"--policy: no such file {args.policy}")
     start = time.perf_counter()
@@ -182,8 +187,12 @@ def main(argv=None) -> int:
         made += generate(data_dir, "train", args.train_shards, args.views, args.workers, policy, geometric)
         made += generate(data_dir, "test", args.test_shards, args.views, args.workers, policy, geometric)
     features, same, weight = load_split(data_dirs, "train", args.train_shards)
-    fit = fit_perceptron(features, same, weight, args.hidden, args.steps, args.seed, desc="seg_merge_train fit")
-    mean, scale, layers = fit
+    fits = [
+        fit_perceptron(features, same, weight, args.hidden, args.steps, seed, args.batch, f"seg_merge_train fit {seed}")
+        for seed in range(args.seed, args.seed + args.ensemble)
+    ]
+    mean, scale = fits[0][:2]  # the standardisation depends on the data only
+    layers = stack_perceptrons([fit[2] for fit in fits]) if len(fits) > 1 else fits[0][2]
     card = {
         "command": "seg_merge_train " + " ".join(sys.argv[1:] if argv is None else argv),
         "features": list(FEATURE_NAMES),
