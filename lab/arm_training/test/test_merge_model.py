@@ -91,6 +91,10 @@ def test_seg_merge_train_makes_shards_trains_and_resumes(tmp_path):
     classifier = MergeClassifier(out)
     assert len(classifier.layers) == 3 and classifier.layers[0][0].shape == (len(FEATURE_NAMES), 4)
     stamp = (tmp_path / "data" / "train" / "shard_000000.npz").stat().st_mtime_ns
-    assert main([*args, "--policy", str(out)]) == 0  # the oracle's shards are kept, the policy's made
+    ensemble = tmp_path / "ensemble.npz"
+    second = [*args[:-1], str(ensemble), "--policy", str(out), "--ensemble", "2", "--batch", "16"]
+    assert main(second) == 0  # the oracle's shards are kept, the policy's made
     assert (tmp_path / "data" / "train" / "shard_000000.npz").stat().st_mtime_ns == stamp
     assert len(list((tmp_path / "data").glob("policy_*/train/shard_000000.npz"))) == 1
+    members = MergeClassifier(ensemble).layers
+    assert [w.shape for w, _ in members] == [(2, len(FEATURE_NAMES), 4), (2, 4, 4), (2, 4, 1)]
