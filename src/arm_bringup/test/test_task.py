@@ -2,7 +2,17 @@ import numpy as np
 import trimesh
 from sensor_msgs.msg import JointState
 
-from arm_bringup.task import EMPTY_GRASP_M, SAME_OBJECT_M, far_from, finger_opening_m, grasp_held, rank_targets
+from arm_bringup.task import (
+    DRY_RUNS,
+    EMPTY_GRASP_M,
+    SAME_OBJECT_M,
+    choose_by_dry_runs,
+    far_from,
+    finger_opening_m,
+    grasp_held,
+    rank_targets,
+)
+from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObject
 from arm_ros.conversions.meshes import mesh_to_msg
 from arm_sim.world import ROBOT_BASE_XY
@@ -62,3 +72,36 @@ def test_a_grasp_holds_when_the_fingers_did_not_close_on_nothing():
     assert not grasp_held("grasp", 0.0), "closed on nothing"
     assert not grasp_held("push", 0.012)
     assert not grasp_held("grasp", None), "no finger reading"
+
+
+def _dry_runs(outcomes: dict):
+    """A dry run per candidate id: outcomes[id] = (met, held), a missing id: no result."""
+    asked = []
+
+    def dry_run(candidate):
+        asked.append(candidate.id)
+        if candidate.id not in outcomes:
+            return None
+        met, held = outcomes[candidate.id]
+        return Manipulate.Result(success=met, held_in_twin=held, message="dry run")
+
+    return dry_run, asked
+
+
+def test_the_target_is_the_first_candidate_whose_dry_run_met_the_task_and_held_it():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in range(1, 5)]
+    dry_run, asked = _dry_runs({1: (False, False), 2: (True, False), 3: (True, True), 4: (True, True)})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 3 and asked == [1, 2, 3], "held at the third: the fourth is not planned"
+    assert "held it" in why and [r["held_in_twin"] for r in runs] == [False, False, True]
+
+
+def test_where_no_dry_run_held_the_task_the_first_that_met_it_is_the_target():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in range(1, DRY_RUNS + 3)]
+    dry_run, asked = _dry_runs({2: (True, False), 5: (True, False)})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 2 and len(asked) == DRY_RUNS and "none held it" in why
+    assert [r["met_in_twin"] for r in runs].count(True) == 2
+    dry_run, _ = _dry_runs({})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target is None and f"no dry run of the {DRY_RUNS} tried" in why

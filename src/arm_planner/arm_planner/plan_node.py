@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,9 +50,12 @@ from arm_ros.conversions import ConversionError
 from arm_ros.conversions.stamps import time_ns
 from arm_ros.executors import QueueAwareMultiThreadedExecutor
 
-DRY_RUN_VALID_S = 60.0  # a dry run's plan may be executed this long after it was made
+# A dry run's plan may be executed this long after it was made (a client choosing among the demo's
+# 10 candidates dry-runs them for up to about a minute) ...
+DRY_RUN_VALID_S = 120.0
 DRY_RUN_JOINT_TOLERANCE_RAD = 0.01  # ... with every arm joint still this near where it started
 DRY_RUN_GRIPPER_TOLERANCE_M = 0.002
+DRY_RUNS_KEPT = 10  # the plans of the last this many dry runs that met the task are kept
 # A client that takes its target from the /arm/meshes array it has just received may send the goal
 # before that array reached this node: a goal stamped newer than every held array waits this long
 # (wall clock) for it. With segmentation and reconstruction busy on 2 cores an array reached the
@@ -104,7 +108,8 @@ class PlanNode(Node):
         self._joints = None  # (arm_q, opening, node-clock ns at receipt) from the latest valid /joint_states
         self._joint_error = ""
         self._busy = False
-        self._dry_run: DryRun | None = None  # the last plan_only goal's plan, if it met the task
+        # the plans of the last DRY_RUNS_KEPT plan_only goals that met the task, by request
+        self._dry_runs: OrderedDict[tuple, DryRun] = OrderedDict()
         self.goals = self.refusals = self.meshes_received = self.meshes_rejected = 0
         self.plan_figures = {}  # timing of the last plan, for /diagnostics
 
@@ -343,6 +348,7 @@ class PlanNode(Node):
             return Manipulate.Result(success=False, message=outcome.message, final_error_m=float("nan"))
         result = Manipulate.Result(
             success=bool(outcome.success),
+            held_in_twin=bool(outcome.result is not None and outcome.result.held),
             message=outcome.message,
             final_error_m=float(outcome.final_error_m),
             trajectory=trajectory,
@@ -366,11 +372,13 @@ class PlanNode(Node):
         self._goal_start = (scene, target_id)
         mode = "plan_only" if goal.plan_only else self.config.execution
         request = (task, target_id, scene.stamp_ns, *self._displacement(goal), round(float(goal.tolerance_m), 6))
-        dry_run, self._dry_run = self._dry_run, None
-        if mode != "plan_only" and dry_run is not None and dry_run.repeated_by(request, self._robot_state()[0]):
-            outcome = dry_run.outcome
-            outcome.message += "; executing the plan of the dry run"
-            return outcome, self._publish(outcome, send=True)
+        if mode != "plan_only":
+            dry_run = self._dry_runs.pop(request, None)
+            self._dry_runs.clear()  # the robot moves: every other dry run's start state is gone
+            if dry_run is not None and dry_run.repeated_by(request, self._robot_state()[0]):
+                outcome = dry_run.outcome
+                outcome.message += "; executing the plan of the dry run"
+                return outcome, self._publish(outcome, send=True)
         if mode == "stream":
             stream = TrajectoryStream(
                 self.session.config.mppi.control_dt_s, self.config.stream_lead_s, self.config.stream_period_s
@@ -385,8 +393,11 @@ class PlanNode(Node):
             return outcome, JointTrajectory()
         if mode == "plan_only":
             joints = self._robot_state()[0]
+            self._dry_runs.pop(request, None)
             if outcome.success and joints is not None:
-                self._dry_run = DryRun(request, joints[0], joints[1], outcome, time.monotonic())
+                self._dry_runs[request] = DryRun(request, joints[0], joints[1], outcome, time.monotonic())
+                while len(self._dry_runs) > DRY_RUNS_KEPT:
+                    self._dry_runs.popitem(last=False)
             return outcome, self._publish(outcome, send=False)
         if mode == "execute":
             if not outcome.success:

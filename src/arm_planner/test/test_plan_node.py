@@ -240,6 +240,41 @@ def test_a_goal_repeating_a_dry_run_the_twin_met_executes_that_plan(graph):
     assert "dry run" not in result.message, "a dry run's plan is executed once"
 
 
+def test_of_several_dry_runs_any_one_may_be_executed(graph):
+    node, client, action, received = graph
+    _publish_inputs(client, list(robot.HOME_Q) + [0.04])
+    time.sleep(0.3)
+    request = node.session.request
+
+    def met_in_the_twin(*args, **kwargs):
+        outcome = request(*args, **kwargs)
+        outcome.success = True
+        return outcome
+
+    node.session.request = met_in_the_twin
+    try:
+        planned = {}
+        for task, displacement_xy in (
+            (Manipulate.Goal.TASK_GRASP, (0.0, 0.0)),
+            (Manipulate.Goal.TASK_PUSH, (0.05, -0.3)),
+        ):
+            dry = Manipulate.Goal(task=task, target_id=4, plan_only=True)
+            dry.goal_displacement.x, dry.goal_displacement.y = displacement_xy
+            result = _wait(_wait(action.send_goal_async(dry)).get_result_async()).result
+            assert not result.held_in_twin, "5 steps: stopped by the budget, not by a held outcome"
+            planned[task] = np.array([p.positions for p in result.trajectory.points])
+    finally:
+        node.session.request = request
+    before = len(received)
+    result = _send(action, Manipulate.Goal.TASK_GRASP, 4)  # the earlier of the two dry runs
+    assert "executing the plan of the dry run" in result.message
+    deadline = time.monotonic() + 5
+    while len(received) == before:
+        assert time.monotonic() < deadline, "the dry run's plan was not sent"
+        time.sleep(0.05)
+    assert np.array_equal(np.array([p.positions for p in received[-1].points]), planned[Manipulate.Goal.TASK_GRASP])
+
+
 def test_goal_plans_on_the_meshes_its_stamp_names(graph):
     node, client, action, _ = graph
     for object_id, stamp_s in ((4, 100), (7, 101)):  # the same box, relabelled in a later frame
