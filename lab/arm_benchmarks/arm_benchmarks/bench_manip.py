@@ -122,13 +122,14 @@ def ground_truth_objects(scene) -> list[TwinObject]:
 
 
 # Closer to the paper's post-processing (intersections removed, convex parts; Section 3): without the
-# stable base, joined parts, depth snapping and solids of revolution that every method otherwise gets
+# stable base, joined parts, depth snapping, solids of revolution and cuboids that every method otherwise gets
 # (small parts dropped and floating ones supported from below remain).
 PAPER_POSTPROCESSING = {
     "stable_base_tilt_deg": 0.0,
     "join_parts": False,
     "snap_to_depth": False,
     "complete_revolutions": False,
+    "complete_cuboids": False,
 }
 
 

@@ -8,5 +8,6 @@ def test_paper_postprocessing_turns_off_the_test_time_stages_and_keeps_the_paper
     assert not settings.join_parts
     assert not settings.snap_to_depth
     assert not settings.complete_revolutions
+    assert not settings.complete_cuboids
     assert settings.remove_intersections
     assert ReconstructionSettings(method="baseline").join_parts  # the default pipeline keeps them

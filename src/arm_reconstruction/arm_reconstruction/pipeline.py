@@ -23,6 +23,7 @@ from arm_core.settings import setting
 from .checkpoint import CheckpointError, default_checkpoint_path, load_checkpoint
 from .colour import vertex_colours
 from .convex_parts import ConvexDecomposer, DecompositionSettings
+from .cuboid import CuboidSettings, cuboid_completion
 from .grid import CHECKPOINT_DEFAULT_K, FrameGrids, GridFrame, GridInputError, frame_grids
 from .meshing import (
     DEFAULT_MIN_COMPONENT_VOXELS,
@@ -45,7 +46,7 @@ STAGES = (
     "network",
     "postprocess",
     "meshing",
-    "revolutions",
+    "shapes",
     "snapping",
     "intersections",
     "decomposition",
@@ -118,7 +119,8 @@ class ReconstructionSettings:
     probability of a solid voxel; table_height_m None = estimated per object; snap_to_depth: the
     seen part of each surface placed on the observed depth (surface_snapping), with snap settings
     `snap`; complete_revolutions: an object whose seen points lie on an upright solid of revolution
-    that agrees with the view becomes that solid (revolution)."""
+    that agrees with the view becomes that solid (revolution); complete_cuboids: else, one whose
+    seen points lie on an upright cuboid that agrees with the view becomes that cuboid (cuboid)."""
 
     method: str = setting("arm", "Reconstruction method", choices=sorted(METHODS), parameter=True)
     checkpoint_path: str = setting("", "Checkpoint file ('': the method's shipped checkpoint)", parameter=True)
@@ -140,6 +142,8 @@ class ReconstructionSettings:
     snap: SnapSettings = field(default_factory=SnapSettings)
     complete_revolutions: bool = setting(True, "Complete upright solids of revolution from their seen side wall")
     revolution: RevolutionSettings = field(default_factory=RevolutionSettings)
+    complete_cuboids: bool = setting(True, "Complete upright boxes from their seen faces, on the support or a box")
+    cuboid: CuboidSettings = field(default_factory=CuboidSettings)
     remove_intersections: bool = setting(True, "Cut overlaps from the larger of two meshes (paper)")
     decomposition: DecompositionSettings = field(default_factory=DecompositionSettings)
     estimate_visibility: bool = setting(True, "Estimate each object's visible fraction")
@@ -318,9 +322,9 @@ class Reconstructor:
         K = np.asarray(K, dtype=np.float64)
         T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
         revolved = [False] * len(meshes)
-        if s.complete_revolutions and grids.observation is not None:
-            with self.timer("revolutions"):
-                meshes, revolved = self.complete_revolutions(meshes, grids)
+        if (s.complete_revolutions or s.complete_cuboids) and grids.observation is not None:
+            with self.timer("shapes"):
+                meshes, revolved = self.complete_shapes(meshes, grids)
         if s.snap_to_depth and meshes:
             with self.timer("snapping"):
                 snapped = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
@@ -352,18 +356,27 @@ class Reconstructor:
             )
         return [objects[i] for i in sorted(objects)]
 
-    def complete_revolutions(self, meshes, grids: FrameGrids) -> tuple[list[trimesh.Trimesh], list[bool]]:
-        """Each non-empty mesh replaced by its object's solid of revolution where one fits the view
-        (revolution_completion) -> (meshes, replaced per mesh)."""
-        out, replaced = [], []
-        for mesh, object_id, frame, grid in zip(meshes, grids.object_ids, grids.frames, grids.grids, strict=True):
+    def complete_shapes(self, meshes, grids: FrameGrids) -> tuple[list[trimesh.Trimesh], list[bool]]:
+        """Each non-empty mesh replaced by its object's solid of revolution (revolution_completion) or,
+        failing that, its upright cuboid (cuboid_completion) where one fits the view -> (meshes,
+        replaced per mesh). Objects go lowest first, so a box stacked on a box rests on its cuboid."""
+        s, observation = self.settings, grids.observation
+        out, replaced = list(meshes), [False] * len(meshes)
+        points = [observation.points_of(i) for i in grids.object_ids]
+        order = sorted(range(len(meshes)), key=lambda n: float(points[n][:, 2].min()) if len(points[n]) else 0.0)
+        for n in order:
+            if not len(out[n].faces):
+                continue
+            object_id, frame, grid = grids.object_ids[n], grids.frames[n], grids.grids[n]
+            normals = observation.normals_of(object_id)
             solid = None
-            if len(mesh.faces):
-                observation = grids.observation
-                points, normals = observation.points_of(object_id), observation.normals_of(object_id)
-                solid = revolution_completion(points, normals, frame, grid, self.settings.revolution)
-            out.append(solid if solid is not None else mesh)
-            replaced.append(solid is not None)
+            if s.complete_revolutions:
+                solid = revolution_completion(points[n], normals, frame, grid, s.revolution)
+            if solid is None and s.complete_cuboids:
+                others = out[:n] + out[n + 1 :]
+                solid = cuboid_completion(points[n], normals, frame, grid, others, s.cuboid)
+            if solid is not None:
+                out[n], replaced[n] = solid, True
         return out, replaced
 
     def snap_meshes(self, meshes, grids: FrameGrids, depth_m, labels, K, T_world_camera) -> list[trimesh.Trimesh]:

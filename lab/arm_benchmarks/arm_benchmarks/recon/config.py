@@ -34,7 +34,14 @@ RESULT_PACKAGES = ("arm_core", "arm_sim", "arm_segmentation", "arm_reconstructio
 
 
 # BenchConfig fields passed to every method's ReconstructionSettings
-PIPELINE_FIELDS = ("threshold", "smoothing_iterations", "snap_to_depth", "stable_base_tilt_deg", "join_parts")
+PIPELINE_FIELDS = (
+    "threshold",
+    "smoothing_iterations",
+    "snap_to_depth",
+    "stable_base_tilt_deg",
+    "join_parts",
+    "complete_cuboids",
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,6 +68,7 @@ class BenchConfig:
     snap_to_depth: bool = True
     stable_base_tilt_deg: float = DEFAULT_STABLE_BASE_TILT_DEG
     join_parts: bool = True
+    complete_cuboids: bool = True
     view: str = "occluded"
     view_candidates: int = 8
     qualitative: int = 4
