@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from .grid import GridFrame
+from .grid import GridFrame, voxelize_mesh
 from .revolution import seen_contradiction
 
 REST_PROBES = 8  # rays down each side of the footprint that look for an object under a cuboid
@@ -27,16 +27,18 @@ REST_PROBES = 8  # rays down each side of the footprint that look for an object 
 class CuboidSettings:
     """max_wall_tilt_deg: largest angle between a side-wall point's normal and the horizontal;
     min_wall_points: fewest side-wall points; max_slanted_share: the largest share of points whose
-    normal is neither a wall's nor a top's (a lying can's, a ball's); min_yaw_coherence: least length of the mean of the
-    wall normals' directions taken modulo 90 degrees (1: every normal along one of the four sides);
-    min_face_points: fewest points that place a side from its seen face, which must lie within
-    face_at_side_m of the farthest seen point that way (else a fold or an edge: the side is at that
-    point, which needs min_top_points points facing up; they place the top too); min_side_m: the least width, depth and
-    height; surface_tolerance_m / min_surface_share: the share of the seen points within this distance
-    of the cuboid's surface, at least; seen_low_share / seen_low_m: walls seen down to this share of the
-    height (or this far) above the support reach it; rest_below_m / min_rest_share: walls ending higher
-    rest on another object whose reconstruction fills at least this share of the footprint this far
-    below their end; max_seen_contradiction: as revolution.RevolutionSettings'."""
+    normal is neither a wall's nor a top's (a lying can's, a ball's); min_yaw_coherence: least length
+    of the mean of the wall normals' directions taken modulo 90 degrees (1: every normal along one of
+    the four sides); min_face_points: fewest points that place a side from its seen face, which must
+    lie within face_at_side_m of the farthest seen point that way (else a fold or an edge: the side is
+    at that point, which needs min_top_points points facing up; they place the top too); min_side_m:
+    the least width, depth and height; surface_tolerance_m / min_surface_share: the share of the seen
+    points within this distance of the cuboid's surface, at least; seen_low_share / seen_low_m: walls
+    seen down to this share of the height (or this far) above the support reach it; rest_below_m /
+    min_rest_share: walls ending higher rest on another object whose reconstruction's surface lies
+    between this far below their end and surface_tolerance_m above it under at least this share of the
+    footprint (rest_height_m); max_hidden_past_share: a hidden side needs the view past it
+    (hidden_sides_in_view); max_seen_contradiction: as revolution.RevolutionSettings'."""
 
     max_wall_tilt_deg: float = 30.0
     min_wall_points: int = 60
@@ -52,6 +54,7 @@ class CuboidSettings:
     seen_low_m: float = 0.01
     rest_below_m: float = 0.02
     min_rest_share: float = 0.25
+    max_hidden_past_share: float = 0.5
     max_seen_contradiction: float = 0.05
 
 
@@ -67,6 +70,7 @@ class CuboidFit:
     bottom_m: float
     top_m: float
     walls_end_m: float
+    hidden_sides: tuple = ()  # (axis, -1 low / +1 high) of the sides placed by the farthest seen point
 
     @property
     def axes(self) -> np.ndarray:
@@ -75,7 +79,9 @@ class CuboidFit:
         return np.array([[c, s], [-s, c]])
 
     def with_bottom(self, bottom_m: float) -> "CuboidFit":
-        return CuboidFit(self.yaw_rad, self.lo_m, self.hi_m, float(bottom_m), self.top_m, self.walls_end_m)
+        return CuboidFit(
+            self.yaw_rad, self.lo_m, self.hi_m, float(bottom_m), self.top_m, self.walls_end_m, self.hidden_sides
+        )
 
 
 def fit_cuboid(
@@ -105,6 +111,7 @@ def fit_cuboid(
     top_points = int(facing_up.sum())
     lo, hi = np.zeros(2), np.zeros(2)
     on_face = np.zeros(len(wall_uv), bool)  # wall points on a seen face's plane (not a neighbour's)
+    hidden = []
     for axis in range(2):
         for sign, bound, percentile in ((-1.0, lo, 1.0), (1.0, hi, 99.0)):
             in_face = (along == axis) & (facing == sign)
@@ -115,6 +122,7 @@ def fit_cuboid(
                 on_face |= in_face & (np.abs(wall_uv[:, axis] - bound[axis]) <= s.surface_tolerance_m)
             elif top_points >= s.min_top_points:
                 bound[axis] = farthest
+                hidden.append((axis, int(sign)))
             else:
                 return None  # a hidden side and no top to reach it
     top = float(np.percentile(points[:, 2], 99.5))
@@ -124,7 +132,7 @@ def fit_cuboid(
     walls_end = float(np.percentile(points[wall][on_face if on_face.any() else slice(None), 2], 1.0))
     if np.any(hi - lo < s.min_side_m) or top - support_height_m < s.min_side_m:
         return None
-    fit = CuboidFit(yaw, lo, hi, support_height_m, top, walls_end)
+    fit = CuboidFit(yaw, lo, hi, support_height_m, top, walls_end, tuple(hidden))
     if surface_share(fit, points, s.surface_tolerance_m) < s.min_surface_share:
         return None
     return fit
@@ -182,17 +190,40 @@ def rest_height_m(fit: CuboidFit, other_meshes, settings: CuboidSettings) -> flo
     return float(np.percentile(surface[under], 90))
 
 
+def hidden_sides_in_view(fit: CuboidFit, frame: GridFrame, hidden_by_others, settings: CuboidSettings) -> bool:
+    """Whether the camera could see past each hidden side: of the voxel centres along its top edge,
+    the two beyond the one at it (which may hold its points), at most max_hidden_past_share are hidden
+    by another object or the image's edge (hidden_by_others: (N, 3) world points -> (N,) bool). Where
+    they are, the box may go on there, and the network's completion is kept; a sensor's shadow (no
+    depth beside an edge) hides nothing."""
+    voxel = frame.voxel_size_m
+    centres = frame.voxel_centers_world()
+    for axis, sign in fit.hidden_sides:
+        lo, hi = fit.lo_m.copy(), fit.hi_m.copy()
+        if sign > 0:
+            lo[axis], hi[axis] = fit.hi_m[axis] + voxel, fit.hi_m[axis] + 3 * voxel
+        else:
+            lo[axis], hi[axis] = fit.lo_m[axis] - 3 * voxel, fit.lo_m[axis] - voxel
+        past = CuboidFit(fit.yaw_rad, lo, hi, fit.top_m - 2 * voxel, fit.top_m, fit.top_m)
+        inside = voxelize_mesh(cuboid_mesh(past), frame)
+        if inside.any() and float(np.mean(hidden_by_others(centres[inside]))) > settings.max_hidden_past_share:
+            return False
+    return True
+
+
 def cuboid_completion(
     points_world,
     normals_world,
     frame: GridFrame,
     grid: np.ndarray,
     other_meshes=(),
+    hidden_by_others=None,
     settings: CuboidSettings = CuboidSettings(),
 ) -> trimesh.Trimesh | None:
     """The object as an upright cuboid (world frame) when its seen points lie on one and the cuboid
     contradicts the view in at most settings.max_seen_contradiction of its voxels; else None.
-    other_meshes: the frame's other objects' reconstructions (world frame), which a box may rest on."""
+    other_meshes: the frame's other objects' reconstructions (world frame), which a box may rest on;
+    hidden_by_others: as hidden_sides_in_view's (None: nothing hides what lies past the box)."""
     support = frame.table_height_m
     fit = fit_cuboid(points_world, normals_world, support, settings)
     if fit is None:
@@ -202,5 +233,7 @@ def cuboid_completion(
     rest_m = None if seen_low else rest_height_m(fit, other_meshes, settings)
     if rest_m is not None:
         fit = fit.with_bottom(rest_m)
+    if hidden_by_others is not None and not hidden_sides_in_view(fit, frame, hidden_by_others, settings):
+        return None
     mesh = cuboid_mesh(fit)
     return mesh if seen_contradiction(mesh, frame, grid) <= settings.max_seen_contradiction else None

@@ -244,6 +244,19 @@ class FrameObservation:
         sl = self._slices.get(int(object_id))
         return self._object_normals[sl] if sl is not None else np.zeros((0, 3))
 
+    def hidden_by_others(self, points_world: np.ndarray, object_id: int) -> np.ndarray:
+        """(N,) bool: the camera cannot see each world point (N, 3) for another segmented object in
+        front of it, or for lying outside the image (no depth return alone hides nothing)."""
+        points_world = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+        camera = points_world @ self.T_camera_world[:3, :3].T + self.T_camera_world[:3, 3]
+        z = camera[:, 2]
+        u, v = (np.floor(c) for c in pixel_coordinates(np.where(z[:, None] > 1e-6, camera, 1.0), self.K))
+        in_image = (z > 1e-6) & (u >= 0) & (u < self.width) & (v >= 0) & (v < self.height)
+        ui, vi = np.where(in_image, u, 0).astype(np.int64), np.where(in_image, v, 0).astype(np.int64)
+        depth, label = self.depth_m[vi, ui], self._labels[vi, ui]
+        in_front = (depth > 0) & (depth < z) & (label != 0) & (label != object_id)
+        return ~in_image | in_front
+
     def frame_table_height(self, max_height_m: float) -> float | None:
         return support_height(self.background_z, max_height_m, min_points=50)
 

@@ -6,6 +6,7 @@ observed voxels the network missed added, thresholding + marching cubes, inter-o
 removal, convex decomposition and a visible-fraction estimate. Usable without ROS.
 """
 
+import functools
 import pathlib
 import time
 from collections.abc import Callable
@@ -374,7 +375,8 @@ class Reconstructor:
                 solid = revolution_completion(points[n], normals, frame, grid, s.revolution)
             if solid is None and s.complete_cuboids:
                 others = out[:n] + out[n + 1 :]
-                solid = cuboid_completion(points[n], normals, frame, grid, others, s.cuboid)
+                hidden = functools.partial(observation.hidden_by_others, object_id=object_id)
+                solid = cuboid_completion(points[n], normals, frame, grid, others, hidden, s.cuboid)
             if solid is not None:
                 out[n], replaced[n] = solid, True
         return out, replaced
