@@ -37,8 +37,8 @@ class CuboidSettings:
     seen down to this share of the height (or this far) above the support reach it; rest_below_m /
     min_rest_share: walls ending higher rest on another object whose reconstruction's surface lies
     between this far below their end and surface_tolerance_m above it under at least this share of the
-    footprint (rest_height_m); max_hidden_past_share: a hidden side needs the view past it
-    (hidden_sides_in_view); max_seen_contradiction: as revolution.RevolutionSettings'."""
+    footprint (rest_height_m); min_seen_past_share / max_hidden_past_share: a hidden side needs
+    the view past it (hidden_sides_in_view); max_seen_contradiction: as revolution.RevolutionSettings'."""
 
     max_wall_tilt_deg: float = 30.0
     min_wall_points: int = 60
@@ -54,6 +54,7 @@ class CuboidSettings:
     seen_low_m: float = 0.01
     rest_below_m: float = 0.02
     min_rest_share: float = 0.25
+    min_seen_past_share: float = 0.25
     max_hidden_past_share: float = 0.5
     max_seen_contradiction: float = 0.05
 
@@ -190,14 +191,18 @@ def rest_height_m(fit: CuboidFit, other_meshes, settings: CuboidSettings) -> flo
     return float(np.percentile(surface[under], 90))
 
 
-def hidden_sides_in_view(fit: CuboidFit, frame: GridFrame, hidden_by_others, settings: CuboidSettings) -> bool:
-    """Whether the camera could see past each hidden side: of the voxel centres along its top edge,
-    the two beyond the one at it (which may hold its points), at most max_hidden_past_share are hidden
-    by another object or the image's edge (hidden_by_others: (N, 3) world points -> (N,) bool). Where
-    they are, the box may go on there, and the network's completion is kept; a sensor's shadow (no
-    depth beside an edge) hides nothing."""
+def hidden_sides_in_view(
+    fit: CuboidFit, frame: GridFrame, grid: np.ndarray, hidden_by_others, settings: CuboidSettings
+) -> bool:
+    """Whether the view bounds each hidden side. Of the voxel centres along its top edge, the two
+    beyond the one at it (which may hold its points): at least min_seen_past_share were seen empty
+    (the camera saw the box end along part of the edge, beside an object standing on it, say), or at
+    most max_hidden_past_share are hidden by another object or the image's edge (hidden_by_others:
+    (N, 3) world points -> (N,) bool; a sensor's shadow, no depth beside an edge, hides nothing).
+    Else the box may go on there, and the network's completion is kept."""
     voxel = frame.voxel_size_m
     centres = frame.voxel_centers_world()
+    seen_empty = np.asarray(grid)[2] > 0
     for axis, sign in fit.hidden_sides:
         lo, hi = fit.lo_m.copy(), fit.hi_m.copy()
         if sign > 0:
@@ -206,7 +211,9 @@ def hidden_sides_in_view(fit: CuboidFit, frame: GridFrame, hidden_by_others, set
             lo[axis], hi[axis] = fit.lo_m[axis] - 3 * voxel, fit.lo_m[axis] - voxel
         past = CuboidFit(fit.yaw_rad, lo, hi, fit.top_m - 2 * voxel, fit.top_m, fit.top_m)
         inside = voxelize_mesh(cuboid_mesh(past), frame)
-        if inside.any() and float(np.mean(hidden_by_others(centres[inside]))) > settings.max_hidden_past_share:
+        if not inside.any() or float(seen_empty[inside].mean()) >= settings.min_seen_past_share:
+            continue
+        if float(np.mean(hidden_by_others(centres[inside]))) > settings.max_hidden_past_share:
             return False
     return True
 
@@ -233,7 +240,7 @@ def cuboid_completion(
     rest_m = None if seen_low else rest_height_m(fit, other_meshes, settings)
     if rest_m is not None:
         fit = fit.with_bottom(rest_m)
-    if hidden_by_others is not None and not hidden_sides_in_view(fit, frame, hidden_by_others, settings):
+    if hidden_by_others is not None and not hidden_sides_in_view(fit, frame, grid, hidden_by_others, settings):
         return None
     mesh = cuboid_mesh(fit)
     return mesh if seen_contradiction(mesh, frame, grid) <= settings.max_seen_contradiction else None

@@ -109,4 +109,10 @@ def test_a_box_whose_far_side_another_object_hides_is_left_to_the_network():
         return points_world[:, 0] < -0.04
 
     assert cuboid_completion(points, normals, _frame(), grid, hidden_by_others=nothing_hidden) is not None
-    assert cuboid_completion(points, normals, _frame(), grid, hidden_by_others=hidden_behind_x) is None
+    behind = grid.copy()
+    behind[2][hidden_behind_x(_frame().voxel_centers_world().reshape(-1, 3)).reshape(behind.shape[1:])] = 0.0
+    assert cuboid_completion(points, normals, _frame(), behind, hidden_by_others=nothing_hidden) is not None
+    assert cuboid_completion(points, normals, _frame(), behind, hidden_by_others=hidden_behind_x) is None
+    assert cuboid_completion(points, normals, _frame(), grid, hidden_by_others=hidden_behind_x) is not None, (
+        "seen past along its edge"
+    )
