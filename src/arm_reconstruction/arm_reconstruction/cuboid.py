@@ -168,12 +168,15 @@ def rest_height_m(fit: CuboidFit, other_meshes, settings: CuboidSettings) -> flo
     surface_tolerance_m over it, under at least min_rest_share of its footprint (a box stacked on a
     box; walls seen lower than that surface pass in front of it): the 90th percentile of their
     surface there, so that it rests on their high points; None when they do not."""
-    meshes = [m for m in other_meshes if len(m.faces)]
-    if not meshes:
-        return None
     side = (np.arange(REST_PROBES) + 0.5) / REST_PROBES
     u, v = np.meshgrid(*(fit.lo_m[:, None] + (fit.hi_m - fit.lo_m)[:, None] * side))
     xy = np.column_stack([u.ravel(), v.ravel()]) @ fit.axes
+    low, high = xy.min(axis=0), xy.max(axis=0)
+    meshes = [
+        m for m in other_meshes if len(m.faces) and np.all(m.bounds[0, :2] <= high) and np.all(m.bounds[1, :2] >= low)
+    ]  # those over the footprint
+    if not meshes:
+        return None
     start_m = fit.top_m - settings.min_side_m  # under its own top: what lies higher is on it, not under it
     origins = np.column_stack([xy, np.full(len(xy), start_m)])
     directions = np.tile([0.0, 0.0, -1.0], (len(xy), 1))
@@ -201,7 +204,6 @@ def hidden_sides_in_view(
     (N, 3) world points -> (N,) bool; a sensor's shadow, no depth beside an edge, hides nothing).
     Else the box may go on there, and the network's completion is kept."""
     voxel = frame.voxel_size_m
-    centres = frame.voxel_centers_world()
     seen_empty = np.asarray(grid)[2] > 0
     for axis, sign in fit.hidden_sides:
         lo, hi = fit.lo_m.copy(), fit.hi_m.copy()
@@ -213,7 +215,8 @@ def hidden_sides_in_view(
         inside = voxelize_mesh(cuboid_mesh(past), frame)
         if not inside.any() or float(seen_empty[inside].mean()) >= settings.min_seen_past_share:
             continue
-        if float(np.mean(hidden_by_others(centres[inside]))) > settings.max_hidden_past_share:
+        centres = frame.voxel_to_world(np.argwhere(inside) + 0.5)
+        if float(np.mean(hidden_by_others(centres))) > settings.max_hidden_past_share:
             return False
     return True
 
