@@ -322,14 +322,14 @@ class Reconstructor:
             ]
         K = np.asarray(K, dtype=np.float64)
         T_world_camera = np.asarray(T_world_camera, dtype=np.float64)
-        revolved = [False] * len(meshes)
+        completed = [False] * len(meshes)
         if (s.complete_revolutions or s.complete_cuboids) and grids.observation is not None:
             with self.timer("shapes"):
-                meshes, revolved = self.complete_shapes(meshes, grids)
+                meshes, completed = self.complete_shapes(meshes, grids)
         if s.snap_to_depth and meshes:
             with self.timer("snapping"):
                 snapped = self.snap_meshes(meshes, grids, depth_m, labels, K, T_world_camera)
-                meshes = [m if done else n for m, n, done in zip(meshes, snapped, revolved, strict=True)]
+                meshes = [m if done else n for m, n, done in zip(meshes, snapped, completed, strict=True)]
         self._stop_if_asked()
         with self.timer("intersections"):
             if s.remove_intersections and len(meshes) > 1:
