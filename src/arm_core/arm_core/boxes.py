@@ -22,3 +22,11 @@ def mask_box(
         slice(max(int(rows[0]) * stride - margin_px, 0), min((int(rows[-1]) + 1) * stride + margin_px, height)),
         slice(max(int(cols[0]) * stride - margin_px, 0), min((int(cols[-1]) + 1) * stride + margin_px, width)),
     )
+
+
+def cropped_intrinsics(K: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
+    """The pinhole K of the (rows, cols) crop of an image with intrinsics K."""
+    K_crop = np.array(K, dtype=np.float64)
+    K_crop[0, 2] -= crop[1].start
+    K_crop[1, 2] -= crop[0].start
+    return K_crop

@@ -57,6 +57,22 @@ def contact_counts(labels: np.ndarray, depth_m: np.ndarray, params: FragmentPara
     return counts + counts.T, np.bincount(np.concatenate(sides), minlength=n)
 
 
+def touching_pixels(labels: np.ndarray, depth_m: np.ndarray, i: int, j: int, params: FragmentParams) -> np.ndarray:
+    """Flat indices of instance i's pixels that touch instance j at its depth (as in contact_counts)."""
+    index = np.arange(labels.size).reshape(labels.shape)
+    hits = [np.zeros(0, dtype=np.int64)]
+    pairs = zip(
+        _neighbour_pairs(labels, params.contact_reach_px),
+        _neighbour_pairs(depth_m, params.contact_reach_px),
+        _neighbour_pairs(index, params.contact_reach_px),
+        strict=True,
+    )
+    for (a, b), (da, db), (ia, ib) in pairs:
+        near = (da > 0) & (db > 0) & (np.abs(da - db) < params.contact_depth_m)
+        hits += [ia[(a == i) & (b == j) & near], ib[(b == i) & (a == j) & near]]
+    return np.unique(np.concatenate(hits))
+
+
 def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, params: FragmentParams) -> np.ndarray:
     """Labels with each fragment given to the larger instance it touches most at its depth (a chain
     of fragments ends in the object), or dropped (see the module docstring); renumbered 1..N in the
@@ -84,7 +100,15 @@ def absorb_fragments(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, par
             owner[i] = int(np.argmax(share))
         elif speck:
             owner[i] = 0
-    for _ in range(n):  # follow chains (fragment -> larger fragment -> object) to their end
+    return join_into_owners(labels, owner)
+
+
+def join_into_owners(labels: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """Labels with each instance i given to owner[i] (0: dropped; chains such as fragment -> larger
+    fragment -> object followed to their end; every owner larger than what it takes, so there are no
+    cycles), renumbered 1..N in the order of the original ids."""
+    n = len(owner) - 1
+    for _ in range(n):
         following = owner[owner]
         if np.array_equal(following, owner):
             break

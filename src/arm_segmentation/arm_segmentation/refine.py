@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from arm_core.boxes import cropped_intrinsics
 from arm_core.camera import world_height
 from arm_segmentation.clustering import chromaticity, hue_distance
 from arm_segmentation.table_plane import TableParams, band_for_depth
@@ -86,9 +87,7 @@ def refine_full_resolution(
 
     labels_crop = up(labels_work)
     near = cv2.dilate((labels_crop > 0).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=params.search_radius_px)
-    K_crop = K.copy()
-    K_crop[0, 2] -= x0
-    K_crop[1, 2] -= y0
+    K_crop = cropped_intrinsics(K, crop)
     depth = depth_m[crop]
     support = up(support_work)
     height = world_height(depth, K_crop, T_world_camera) - support

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from arm_core.boxes import mask_box
+from arm_core.boxes import cropped_intrinsics, mask_box
 from arm_core.camera import backproject_image, backproject_pixels, organized_normals, transform_points
 from arm_core.frames import FrameInputError, validate_frame
 from arm_core.settings import setting
@@ -26,6 +26,7 @@ from arm_segmentation.label_stats import label_maximum
 from arm_segmentation.merge_model import LearnedMerge, MergeParams, pixel_statistics, shared_classifier
 from arm_segmentation.occluders import OccluderParams, expected_table, near_occluders
 from arm_segmentation.outline_model import OutlineParams, refine_outline, shared_outline_classifier
+from arm_segmentation.overhangs import OverhangParams, join_overhangs
 from arm_segmentation.refine import RefineParams, instance_colours, refine_full_resolution, upsample, upsample_linear
 from arm_segmentation.table_plane import (
     SupportLevel,
@@ -98,6 +99,7 @@ class SegmentationParams:
     merge: MergeParams = field(default_factory=MergeParams)
     outline: OutlineParams = field(default_factory=OutlineParams)
     fragments: FragmentParams = field(default_factory=FragmentParams)
+    overhangs: OverhangParams = field(default_factory=OverhangParams)
 
 
 @dataclass
@@ -319,9 +321,7 @@ def segment_detailed(
     maps = learned_maps(rgb, stage, params.boundary)
     crop = fine_crop(stage.objects, stride, depth_full.shape, params.fine) if stride > 1 else None
     if crop is not None:
-        K_crop = K_full.copy()
-        K_crop[0, 2] -= crop[1].start
-        K_crop[1, 2] -= crop[0].start
+        K_crop = cropped_intrinsics(K_full, crop)
         cluster = params.fine.cluster_params(params.cluster)
         support = _upsampled_crop(stage.support, crop, stride, depth_full.shape)
         fine = _geometry(depth_full[crop], K_crop, T, params, cluster.step_px, stage.levels, support)
@@ -372,6 +372,7 @@ def segment_detailed(
         labels = _renumber(np.where(exclude, 0, labels))
     labels = drop_beside_support(labels, stage, stride, params.table)
     labels = absorb_fragments(labels, depth_full, K_full, params.fragments)
+    labels = join_overhangs(labels, depth_full, K_full, T, stage.levels, params.overhangs)
     reason = empty_reason(labels, stage.levels, params)
     return SegmentationResult(labels, table, stage.levels, objectness, reason)
 
