@@ -15,9 +15,10 @@ it touches the object that carries it at that object's depth. An instance is an 
 It joins the larger instance it touches most. A box stacked on another, or one seen above a nearer
 object, stays apart: the space under it lies inside the object under it or behind the nearer one, where
 the camera cannot see it empty (on the OSD frames no such instance reached 0.36; the handles and
-chucks of the household frames, and a bowl rim on OSD, 0.50-0.67). So does a part that the other touches only along its bottom
-edge, resting on it (a lamp's shade over a stem that went to the object behind it), or only along its
-top, lying under it (an object mostly hidden under another that leans on it).
+chucks of the household frames, and a bowl's rim on OSD, 0.50-0.67). So does a part that the other
+touches only along its bottom edge, resting on it (a lamp's shade over a stem that went to the object
+behind it), or only along its top, lying under it (an object mostly hidden under another that leans
+on it).
 """
 
 from dataclasses import dataclass
