@@ -7,7 +7,8 @@ it touches the object that carries it at that object's depth. An instance is an 
 - its lowest points (the low_percentile of its heights) are more than min_height_m above its support;
 - of the points sampled every sample_step_m below its points, down to the support, at least
   min_free_share are seen empty: the camera's depth at their pixel lies more than free_margin_m
-  beyond them;
+  beyond them; and at most max_rest_share lie on the seen surface of a third instance (one it could
+  rest on: a lamp's shade over its stem, when the stem is an instance of its own);
 - at least min_contact_share of its outline runs along a larger instance at its depth
   (fragments.contact_counts), and that contact runs up its side: the 10th percentile of the
   contact's heights lies below side_share of the way from the instance's low_percentile height to its
@@ -42,6 +43,7 @@ class OverhangParams:
     min_height_m: float = 0.03  # the instance's low_percentile height above its support
     low_percentile: float = 10.0
     min_free_share: float = 0.45  # of the samples below the instance, seen empty
+    max_rest_share: float = 0.03  # of the samples below it, on a third instance's surface
     min_contact_share: float = 0.1  # of its outline pixel pairs, along the larger instance it joins
     side_share: float = 0.5  # of its height range, that the contact reaches below and above
     sample_step_m: float = 0.01
@@ -59,24 +61,37 @@ def support_height_m(heights_m: np.ndarray, xy_m: np.ndarray, levels: list[Suppo
     return max(under) if under else float(levels[0].height_m)
 
 
-def seen_empty_share(points_world: np.ndarray, support_m: float, depth_m, K, T_world_camera, params: OverhangParams):
-    """(seen empty, sampled): counts of the points every sample_step_m below points_world (N, 3),
-    down to support_m + sample_step_m, that the camera sees empty (its depth beyond them by
-    free_margin_m). Samples outside the image or on pixels without depth are not seen empty."""
+@dataclass
+class SpaceBelow:
+    """What the camera sees of the points sampled below an instance: `sampled` of them, `empty` seen
+    empty (the depth at their pixel beyond them by free_margin_m), and, of those on a seen surface
+    (within free_margin_m of it), `on_labels`: the instance labels of those surfaces' pixels."""
+
+    sampled: int
+    empty: int
+    on_labels: np.ndarray
+
+
+def space_below(points_world: np.ndarray, support_m: float, labels, depth_m, K, T_world_camera, params: OverhangParams):
+    """SpaceBelow of the points every sample_step_m below points_world (N, 3), down to support_m +
+    sample_step_m. Samples outside the image or on pixels without depth are neither empty nor on a
+    surface."""
     drops = np.arange(params.sample_step_m, 1.0, params.sample_step_m)
     drops = drops[drops < float(points_world[:, 2].max() - support_m) - params.sample_step_m]
     samples = np.repeat(points_world[:, None, :], len(drops), axis=1)
     samples[..., 2] -= drops[None, :]
     samples = samples[samples[..., 2] > support_m + params.sample_step_m]
     if len(samples) == 0:
-        return 0, 0
+        return SpaceBelow(0, 0, np.zeros(0, dtype=labels.dtype))
     uv, depth_along_ray = project_points(samples, K, T_world_camera)
     height, width = depth_m.shape
     u, v = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
     inside = (u >= 0) & (u < width) & (v >= 0) & (v < height) & (depth_along_ray > 0)
-    seen = np.zeros(len(samples))
-    seen[inside] = depth_m[v[inside], u[inside]]
-    return int(np.count_nonzero(seen > depth_along_ray + params.free_margin_m)), len(samples)
+    u, v, depth_along_ray = u[inside], v[inside], depth_along_ray[inside]
+    seen = depth_m[v, u]
+    empty = int(np.count_nonzero(seen > depth_along_ray + params.free_margin_m))
+    on_surface = (seen > 0) & (np.abs(seen - depth_along_ray) <= params.free_margin_m)
+    return SpaceBelow(len(samples), empty, labels[v[on_surface], u[on_surface]])
 
 
 def instance_points(labels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, T_world_camera: np.ndarray):
@@ -119,10 +134,13 @@ def join_overhangs(labels, depth_m, K, T_world_camera, levels: list[SupportLevel
         if larger.max() < params.min_contact_share * max(outline[i], 1):
             continue
         columns = mine[np.linspace(0, len(mine) - 1, min(params.columns, len(mine))).astype(np.int64)]
-        empty, sampled = seen_empty_share(columns, support_m, depth_m, K, T_world_camera, params)
-        if not sampled or empty < params.min_free_share * sampled:
+        below = space_below(columns, support_m, labels, depth_m, K, T_world_camera, params)
+        if not below.sampled or below.empty < params.min_free_share * below.sampled:
             continue
         j = int(np.argmax(larger))
+        on_others = np.count_nonzero((below.on_labels != i) & (below.on_labels != j) & (below.on_labels > 0))
+        if on_others > params.max_rest_share * below.sampled:
+            continue  # a third instance's surface right below it: it may rest on that
         contact_heights_m = heights_m[touching_pixels(sub_labels, sub_depth, i, j, contact)]
         contact_low_m, contact_high_m = np.percentile(contact_heights_m, [10, 90])
         middle_m = low_m + params.side_share * (high_m - low_m)

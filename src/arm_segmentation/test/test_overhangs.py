@@ -3,7 +3,7 @@ from seg_fixtures import Box, look_at, render
 
 from arm_core.camera import backproject_image, transform_points
 from arm_segmentation.fragments import FragmentParams, contact_counts
-from arm_segmentation.overhangs import OverhangParams, join_overhangs, seen_empty_share
+from arm_segmentation.overhangs import OverhangParams, join_overhangs, space_below
 from arm_segmentation.table_plane import SupportLevel
 
 TABLE = SupportLevel(0.0, 1.0, np.zeros((0, 3)), np.zeros((0, 2)))  # no footprint: holds every point
@@ -62,9 +62,10 @@ def evidence(boxes, part: int, carrier: int):
     points = transform_points(backproject_image(depth, K, np.float64), T_WORLD_CAMERA)
     mine = points[(labels == part) & (depth > 0)]
     columns = mine[np.linspace(0, len(mine) - 1, PARAMS.columns).astype(np.int64)]
-    empty, sampled = seen_empty_share(columns, 0.0, depth, K, T_WORLD_CAMERA, PARAMS)
+    below = space_below(columns, 0.0, labels, depth, K, T_WORLD_CAMERA, PARAMS)
     touching, outline = contact_counts(labels, depth, FragmentParams())
-    return np.percentile(mine[:, 2], PARAMS.low_percentile), empty / sampled, touching[part, carrier] / outline[part]
+    low_m = np.percentile(mine[:, 2], PARAMS.low_percentile)
+    return low_m, below.empty / below.sampled, touching[part, carrier] / outline[part]
 
 
 def assert_only_the_contact_keeps_them_apart(boxes, part: int, carrier: int):
@@ -92,3 +93,17 @@ def test_a_part_under_a_slab_stays_apart():
     slab = Box((0.0, 0.0, 0.15), (0.03, 0.09, 0.01), rgb=(60, 60, 200))
     block = Box((0.0, 0.0, 0.11), (0.025, 0.025, 0.03))
     assert_only_the_contact_keeps_them_apart([slab, block], part=2, carrier=1)
+
+
+def test_a_block_on_its_own_pillar_beside_a_box_stays_apart():
+    """A 12 x 16 x 6 cm block on a 2.4 cm pillar of its own, flush against a 20 cm box's side: the
+    table is seen below most of it and the box touches its side, but the pillar's surface right below
+    it is a third instance it can rest on (a lamp's shade over its stem)."""
+    box = Box((0.0, 0.11, 0.1), (0.06, 0.06, 0.1), rgb=(60, 160, 60))
+    block = Box((0.0, -0.03, 0.18), (0.06, 0.08, 0.03), rgb=(60, 60, 200))
+    pillar = Box((-0.045, -0.03, 0.075), (0.012, 0.012, 0.075))
+    boxes = [box, block, pillar]
+    _, depth, labels, K = render(boxes, T_WORLD_CAMERA)
+    without_rest_rule = join_overhangs(labels, depth, K, T_WORLD_CAMERA, [TABLE], OverhangParams(max_rest_share=1.0))
+    assert len(np.unique(without_rest_rule[without_rest_rule > 0])) == 2, "the scene tests the rest rule"
+    assert np.array_equal(join_overhangs(labels, depth, K, T_WORLD_CAMERA, [TABLE], PARAMS), labels)
