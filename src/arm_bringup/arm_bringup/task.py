@@ -1,12 +1,13 @@
 """The demo's manipulation request. Candidates are the reachable reconstructed objects, most visible
-first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS of them
-are planned without executing (plan_only goals); the first whose plan meets the task in the planner's
-twin and holds it is the target, else the first that meets it at all (in the demo benchmark's runs a
-plan that held the task lifted its target in the simulator in 55 of 75 attempts, one that met it only
-at the end of its step budget in 12 of 23). The same goal without plan_only executes that very plan
-(plan_node keeps it), judged in the simulator by how the true object moved. A grasp the robot finds
-empty sends the arm home and is tried again on the next view, up to ATTEMPTS times. Where no object
-suits the task, or no dry run meets it, nothing is executed and the reason is reported."""
+first (for a grasp, those the open gripper can span; a rearrange prefers them). DRY_RUNS plan-only
+goals plan them in turn without executing, each again while goals remain; the first whose plan meets
+the task in the planner's twin and holds it is the target, else the first that met it at all (in the
+demo benchmark's runs a plan that held the task lifted its target in the simulator in 55 of 75
+attempts, one that met it only at the end of its step budget in 12 of 23). The same goal without
+plan_only executes that very plan (plan_node keeps it), judged in the simulator by how the true
+object moved. A grasp the robot finds empty, or never closed, sends the arm home and is tried again on
+the next view, up to ATTEMPTS times. Where no object suits the task, or no dry run meets it, nothing is
+executed and the reason is reported."""
 
 import time
 
@@ -24,18 +25,21 @@ from arm_planner.tasks.base import narrowest_horizontal_width_m
 from arm_ros.conversions.images import image_to_numpy
 from arm_ros.conversions.meshes import msg_to_mesh
 from arm_ros.conversions.poses import pose_to_matrix
-from arm_sim.robot import FINGER_GAP_OPEN_M, FINGER_JOINT_NAMES, HOME_Q, JOINT_NAMES
+from arm_sim.robot import FINGER_GAP_OPEN_M, FINGER_JOINT_NAMES, GRIPPER_OPEN_M, HOME_Q, JOINT_NAMES
 from arm_sim.world import ROBOT_BASE_XY
 
 # Side room a grasp leaves between the object and each finger, metres.
 GRASP_SIDE_ROOM_M = 0.005
-# Candidates, most visible first, planned without executing before one is chosen (a dry run takes
-# about 3 s; in the demo's scenes about half meet the task in the twin).
+# Plan-only goals over the candidates, most visible first, before one is chosen (a dry run takes about
+# 4 s; in the demo's scenes about half meet the task in the twin).
 DRY_RUNS = 10
 # Attempts at a grasp: one the robot finds holds nothing (grasp_held) is tried again on a new view.
 ATTEMPTS = 3
 # A finger closed to this or less (m) holds nothing (a lamp held by its 3 mm stem reads 1.6 mm).
 EMPTY_GRASP_M = 0.001
+# A finger within this of fully open (m) never closed: the widest target the demo grasps (7.2 cm)
+# leaves it 5 mm short of open.
+OPEN_GRASP_M = 0.002
 # Before the scene is observed again the arm goes back to its home pose, out of the camera's way.
 HOME_MOTION_S = 2.5
 ARM_CONTROLLER_ACTION = "arm_controller/follow_joint_trajectory"
@@ -98,16 +102,22 @@ def send_and_wait(node, client, goal, timeout_s: float = 400.0):
 
 
 def choose_by_dry_runs(candidates: list, dry_run):
-    """(target or None, why, dry runs): among up to DRY_RUNS candidates, the first whose plan-only
-    request met the task in the planner's twin and held it (held_in_twin); where none held, the first
-    that met it at all; None when none did (a plan predicted to fail is not executed). plan_node keeps
-    every dry run's plan, so the chosen one is executed as it was planned. dry_run(candidate): the
-    plan-only goal's Manipulate.Result, or None."""
-    runs, first_met = [], None
-    for candidate in candidates[:DRY_RUNS]:
+    """(target or None, why, dry runs): DRY_RUNS plan-only requests over the first DRY_RUNS
+    candidates, each once in turn and then, while requests remain, again in the same order (MPPI
+    samples anew each time, so a candidate whose plan did not meet the task, or met it without
+    holding it, may the next time). The target is the first candidate whose plan met the task in the
+    planner's twin and held it (held_in_twin); where none held, the first whose latest dry run met it
+    at all (plan_node keeps the latest plan of each request, and executes it as it was planned); None
+    when none did (a plan predicted to fail is not executed). dry_run(candidate): the plan-only goal's
+    Manipulate.Result, or None."""
+    pool = candidates[:DRY_RUNS]
+    runs, latest_met = [], {}
+    for turn in range(DRY_RUNS if pool else 0):
+        candidate = pool[turn % len(pool)]
         result = dry_run(candidate)
         met = bool(result is not None and result.success)
         held = bool(met and result.held_in_twin)
+        latest_met[candidate.id] = met
         runs.append(
             {
                 "id": int(candidate.id),
@@ -116,19 +126,18 @@ def choose_by_dry_runs(candidates: list, dry_run):
                 "message": result.message if result else "no result",
             }
         )
-        if held or (met and first_met is None):
-            first_met = candidate
         if held:
             break
-    tried = f"{len(runs)} of {min(len(candidates), DRY_RUNS)} tried"
-    if first_met is None:
-        return None, f"no dry run of the {len(runs)} tried met the task in the twin", runs
-    seen = f"visible {first_met.visible_fraction:.0%}"
-    if runs[-1]["held_in_twin"]:
-        how = "met the task in the twin and held it"
+    tried = f"{len(runs)} dry run(s) of {len(pool)} candidate(s)"
+    if runs and runs[-1]["held_in_twin"]:
+        target, how = pool[(len(runs) - 1) % len(pool)], "met the task in the twin and held it"
     else:
+        target = next((c for c in pool if latest_met.get(c.id)), None)
         how = "met the task in the twin at the end of its step budget (none held it)"
-    return first_met, f"object {first_met.id} ({seen}): its dry run {how} ({tried})", runs
+    if target is None:
+        return None, f"no dry run of the {len(runs)} tried met the task in the twin ({tried})", runs
+    seen = f"visible {target.visible_fraction:.0%}"
+    return target, f"object {target.id} ({seen}): its dry run {how} ({tried})", runs
 
 
 def finger_opening_m(joint_states) -> float | None:
@@ -140,10 +149,11 @@ def finger_opening_m(joint_states) -> float | None:
 
 
 def grasp_held(task: str, finger_m: float | None) -> bool:
-    """The robot's own verdict on a grasp: its fingers did not close on nothing. (The view after the
-    motion is no judge: with the held target masked as part of the arm, the object plan_node finds
-    nearest its last centre is a neighbour that did not move.)"""
-    return task == "grasp" and finger_m is not None and finger_m > EMPTY_GRASP_M
+    """The robot's own verdict on a grasp: its fingers closed, and not on nothing (open to within
+    OPEN_GRASP_M of GRIPPER_OPEN_M, they never closed on the target). (The view after the motion is no
+    judge: with the held target masked as part of the arm, the object plan_node finds nearest its last
+    centre is a neighbour that did not move.)"""
+    return task == "grasp" and finger_m is not None and EMPTY_GRASP_M < finger_m < GRIPPER_OPEN_M - OPEN_GRASP_M
 
 
 def truth_positions(poses) -> np.ndarray:

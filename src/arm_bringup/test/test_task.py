@@ -15,6 +15,7 @@ from arm_bringup.task import (
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObject
 from arm_ros.conversions.meshes import mesh_to_msg
+from arm_sim.robot import GRIPPER_OPEN_M
 from arm_sim.world import ROBOT_BASE_XY
 
 
@@ -70,6 +71,7 @@ def test_a_grasp_holds_when_the_fingers_did_not_close_on_nothing():
     assert grasp_held("grasp", 0.0016), "a thin stem between the fingers"
     assert grasp_held("grasp", 0.012)
     assert not grasp_held("grasp", 0.0), "closed on nothing"
+    assert not grasp_held("grasp", GRIPPER_OPEN_M), "never closed"
     assert not grasp_held("push", 0.012)
     assert not grasp_held("grasp", None), "no finger reading"
 
@@ -100,8 +102,38 @@ def test_where_no_dry_run_held_the_task_the_first_that_met_it_is_the_target():
     candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in range(1, DRY_RUNS + 3)]
     dry_run, asked = _dry_runs({2: (True, False), 5: (True, False)})
     target, why, runs = choose_by_dry_runs(candidates, dry_run)
-    assert target.id == 2 and len(asked) == DRY_RUNS and "none held it" in why
+    assert target.id == 2 and asked == list(range(1, DRY_RUNS + 1)) and "none held it" in why
     assert [r["met_in_twin"] for r in runs].count(True) == 2
     dry_run, _ = _dry_runs({})
     target, why, runs = choose_by_dry_runs(candidates, dry_run)
     assert target is None and f"no dry run of the {DRY_RUNS} tried" in why
+
+
+def test_fewer_candidates_than_dry_runs_are_planned_again_in_turn():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in (1, 2)]
+    outcomes = iter([(False, False), (True, False), (False, False), (True, True)])
+
+    def dry_run(candidate):
+        met, held = next(outcomes)
+        return Manipulate.Result(success=met, held_in_twin=held, message="dry run")
+
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 2 and [r["id"] for r in runs] == [1, 2, 1, 2], "held at its second dry run"
+    assert "held it" in why
+    dry_run, asked = _dry_runs({1: (False, False)})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target is None and asked == [1, 2] * (DRY_RUNS // 2), "every dry run is spent"
+
+
+def test_the_fallback_is_a_candidate_whose_latest_dry_run_met_the_task():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in (1, 2)]
+    calls = {1: 0, 2: 0}
+
+    def dry_run(candidate):
+        calls[candidate.id] += 1
+        # object 1 met the task only at its first dry run: plan_node no longer keeps that plan
+        met = candidate.id == 2 or calls[1] == 1
+        return Manipulate.Result(success=met, held_in_twin=False, message="dry run")
+
+    target, why, _ = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 2 and "none held it" in why
