@@ -1,9 +1,9 @@
 """The demo's manipulation request. Candidates are the reachable reconstructed objects, most visible
 first (for a grasp, those the open gripper can span; a rearrange prefers them). DRY_RUNS plan-only
 goals plan them in turn without executing, each again while goals remain; the first whose plan meets
-the task in the planner's twin and holds it is the target, else the first that met it at all (in the
-demo benchmark's runs a plan that held the task lifted its target in the simulator in 55 of 75
-attempts, one that met it only at the end of its step budget in 12 of 23). The same goal without
+the task in the planner's twin and holds it is the target, else the first whose latest dry run met it
+(in the demo benchmark's runs a plan that held the task lifted its target in the simulator in 55 of
+75 attempts, one that met it only at the end of its step budget in 12 of 23). The same goal without
 plan_only executes that very plan (plan_node keeps it), judged in the simulator by how the true
 object moved. A grasp the robot finds empty, or never closed, sends the arm home and is tried again on
 the next view, up to ATTEMPTS times. Where no object suits the task, or no dry run meets it, nothing is
