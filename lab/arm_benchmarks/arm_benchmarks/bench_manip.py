@@ -237,6 +237,8 @@ def run_method(
         if outcome.result is not None and len(outcome.result.step_ms):
             row["mppi_step_ms"] = median(outcome.result.step_ms)
             row["plan_steps"] = len(outcome.result.times_s)
+        if outcome.result is not None and outcome.result.replays.twins:
+            row["twin_replays"] = [outcome.result.replays.met, outcome.result.replays.twins]
         reward = getattr(session.planner, "_last_reward", None)
         if getattr(reward, "grasp_site_moved", False):
             row["grasp_site_moved"] = True

@@ -1,13 +1,16 @@
 """The demo's manipulation request. Candidates are the reachable reconstructed objects, most visible
-first (for a grasp, those the open gripper can span; a rearrange prefers them). DRY_RUNS plan-only
-goals plan them in turn without executing, each again while goals remain; the first whose plan meets
-the task in the planner's twin and holds it is the target, else the first whose latest dry run met it
-(in the demo benchmark's runs a plan that held the task lifted its target in the simulator in 55 of
-75 attempts, one that met it only at the end of its step budget in 12 of 23). The same goal without
-plan_only executes that very plan (plan_node keeps it), judged in the simulator by how the true
-object moved. A grasp the robot finds empty, or never closed, sends the arm home and is tried again on
-the next view, up to ATTEMPTS times. Where no object suits the task, or no dry run meets it, nothing is
-executed and the reason is reported."""
+first (for a grasp, those the open gripper can span; a rearrange prefers them). Up to DRY_RUNS
+plan-only goals plan them in turn without executing, each again while goals remain; plan_node replays
+each plan that met the task in perturbed twins (objects moved by millimetres, friction, mass, latency,
+joint offsets). The first candidate whose plan met the task in the planner's twin, held it and met it
+in at least ROBUST_SHARE of its perturbed twins is the target; else the held plan met in the most
+perturbed twins; else the first whose latest dry run met the task (in the demo benchmark's runs a plan
+that held the task lifted its target in the simulator in 55 of 75 attempts, one that met it only at
+the end of its step budget in 12 of 23). The same goal without plan_only executes that very plan
+(plan_node keeps it), judged in the simulator by how the true object moved. A grasp the robot finds
+empty, or never closed, sends the arm home and is tried again on the next view, up to ATTEMPTS times.
+Where no object suits the task, or no dry run meets it, nothing is executed and the reason is
+reported."""
 
 import time
 
@@ -33,6 +36,8 @@ GRASP_SIDE_ROOM_M = 0.005
 # Plan-only goals over the candidates, most visible first, before one is chosen (a dry run takes about
 # 4 s; in the demo's scenes about half meet the task in the twin).
 DRY_RUNS = 10
+# A held plan met in at least this share of its perturbed twins (plan_node's replays) ends the dry runs.
+ROBUST_SHARE = 0.8
 # Attempts at a grasp: one the robot finds holds nothing (grasp_held) is tried again on a new view.
 ATTEMPTS = 3
 # A finger closed to this or less (m) holds nothing (a lamp held by its 3 mm stem reads 1.6 mm).
@@ -101,43 +106,58 @@ def send_and_wait(node, client, goal, timeout_s: float = 400.0):
     return result_future.result().result if result_future.done() else None
 
 
+def _replays(result) -> tuple[int, int]:
+    """(perturbed twins met, replayed) of a dry run's result (0, 0: not replayed)."""
+    return int(result.perturbed_twins_met), int(result.perturbed_twins)
+
+
+def _robust(run: dict) -> bool:
+    met, twins = run["perturbed_twins"]
+    return run["held_in_twin"] and twins > 0 and met >= ROBUST_SHARE * twins
+
+
 def choose_by_dry_runs(candidates: list, dry_run):
-    """(target or None, why, dry runs): DRY_RUNS plan-only requests over the first DRY_RUNS
+    """(target or None, why, dry runs): up to DRY_RUNS plan-only requests over the first DRY_RUNS
     candidates, each once in turn and then, while requests remain, again in the same order (MPPI
     samples anew each time, so a candidate whose plan did not meet the task, or met it without
-    holding it, may the next time). The target is the first candidate whose plan met the task in the
-    planner's twin and held it (held_in_twin); where none held, the first whose latest dry run met it
-    at all (plan_node keeps the latest plan of each request, and executes it as it was planned); None
-    when none did (a plan predicted to fail is not executed). dry_run(candidate): the plan-only goal's
-    Manipulate.Result, or None."""
+    holding it, may the next time). plan_node replays each plan that met the task in perturbed twins.
+    The target is the first candidate whose plan met the task in the planner's twin, held it
+    (held_in_twin) and met it in at least ROBUST_SHARE of its perturbed twins; where none did, of the
+    candidates whose latest dry run held, the one met in the most perturbed twins (the first of
+    equals); where none held, the first whose latest dry run met the task at all (plan_node keeps the
+    latest plan of each request, and executes it as it was planned); None when none did (a plan
+    predicted to fail is not executed). dry_run(candidate): the plan-only goal's Manipulate.Result,
+    or None."""
     pool = candidates[:DRY_RUNS]
-    runs, latest_met = [], {}
+    runs, latest = [], {}
     for turn in range(DRY_RUNS if pool else 0):
         candidate = pool[turn % len(pool)]
         result = dry_run(candidate)
         met = bool(result is not None and result.success)
-        held = bool(met and result.held_in_twin)
-        latest_met[candidate.id] = met
-        runs.append(
-            {
-                "id": int(candidate.id),
-                "met_in_twin": met,
-                "held_in_twin": held,
-                "message": result.message if result else "no result",
-            }
-        )
-        if held:
+        run = {
+            "id": int(candidate.id),
+            "met_in_twin": met,
+            "held_in_twin": bool(met and result.held_in_twin),
+            "perturbed_twins": _replays(result) if met else (0, 0),
+            "message": result.message if result else "no result",
+        }
+        runs.append(run)
+        latest[candidate.id] = run
+        if _robust(run):
             break
     tried = f"{len(runs)} dry run(s) of {len(pool)} candidate(s)"
-    if runs and runs[-1]["held_in_twin"]:
-        target, how = pool[(len(runs) - 1) % len(pool)], "met the task in the twin and held it"
+    held = [c for c in pool if c.id in latest and latest[c.id]["held_in_twin"]]
+    if held:
+        target = max(held, key=lambda c: latest[c.id]["perturbed_twins"][0])
+        met, twins = latest[target.id]["perturbed_twins"]
+        how = f"met the task in the twin and held it, and met it in {met} of {twins} perturbed twins"
     else:
-        target = next((c for c in pool if latest_met.get(c.id)), None)
+        target = next((c for c in pool if c.id in latest and latest[c.id]["met_in_twin"]), None)
         how = "met the task in the twin at the end of its step budget (none held it)"
     if target is None:
         return None, f"no dry run of the {len(runs)} tried met the task in the twin ({tried})", runs
     seen = f"visible {target.visible_fraction:.0%}"
-    return target, f"object {target.id} ({seen}): its dry run {how} ({tried})", runs
+    return target, f"object {target.id} ({seen}): its latest dry run {how} ({tried})", runs
 
 
 def finger_opening_m(joint_states) -> float | None:

@@ -76,16 +76,22 @@ def test_a_grasp_holds_when_the_fingers_did_not_close_on_nothing():
     assert not grasp_held("grasp", None), "no finger reading"
 
 
+def _result(met: bool, held: bool, perturbed_met: int = 5, perturbed: int = 5) -> Manipulate.Result:
+    return Manipulate.Result(
+        success=met, held_in_twin=held, perturbed_twins=perturbed, perturbed_twins_met=perturbed_met, message="dry run"
+    )
+
+
 def _dry_runs(outcomes: dict):
-    """A dry run per candidate id: outcomes[id] = (met, held), a missing id: no result."""
+    """A dry run per candidate id: outcomes[id] = (met, held) or (met, held, perturbed twins met of 5),
+    a missing id: no result."""
     asked = []
 
     def dry_run(candidate):
         asked.append(candidate.id)
         if candidate.id not in outcomes:
             return None
-        met, held = outcomes[candidate.id]
-        return Manipulate.Result(success=met, held_in_twin=held, message="dry run")
+        return _result(*outcomes[candidate.id])
 
     return dry_run, asked
 
@@ -114,8 +120,7 @@ def test_fewer_candidates_than_dry_runs_are_planned_again_in_turn():
     outcomes = iter([(False, False), (True, False), (False, False), (True, True)])
 
     def dry_run(candidate):
-        met, held = next(outcomes)
-        return Manipulate.Result(success=met, held_in_twin=held, message="dry run")
+        return _result(*next(outcomes))
 
     target, why, runs = choose_by_dry_runs(candidates, dry_run)
     assert target.id == 2 and [r["id"] for r in runs] == [1, 2, 1, 2], "held at its second dry run"
@@ -133,7 +138,26 @@ def test_the_fallback_is_a_candidate_whose_latest_dry_run_met_the_task():
         calls[candidate.id] += 1
         # object 1 met the task only at its first dry run: plan_node no longer keeps that plan
         met = candidate.id == 2 or calls[1] == 1
-        return Manipulate.Result(success=met, held_in_twin=False, message="dry run")
+        return _result(met, False)
 
     target, why, _ = choose_by_dry_runs(candidates, dry_run)
     assert target.id == 2 and "none held it" in why
+
+
+def test_dry_runs_go_on_past_a_held_plan_that_fails_in_its_perturbed_twins():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in range(1, 5)]
+    dry_run, asked = _dry_runs({1: (True, True, 2), 2: (True, True, 3), 3: (True, True, 4), 4: (True, True, 5)})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 3 and asked == [1, 2, 3], "4 of 5 perturbed twins is enough: the fourth is not planned"
+    assert "4 of 5 perturbed twins" in why and runs[0]["perturbed_twins"] == (2, 5)
+
+
+def test_where_no_held_plan_is_robust_the_one_met_in_most_perturbed_twins_is_the_target():
+    candidates = [_object(i, (0.05, 0.05, 0.1), (0.1 * i, 0.0), 1.0) for i in range(1, 4)]
+    dry_run, asked = _dry_runs({1: (True, True, 1), 2: (True, False, 5), 3: (True, True, 3)})
+    target, why, runs = choose_by_dry_runs(candidates, dry_run)
+    assert len(asked) == DRY_RUNS, "every dry run is spent looking for a robust plan"
+    assert target.id == 3 and "3 of 5 perturbed twins" in why, "held plans first, then the most perturbed twins"
+    dry_run, _ = _dry_runs({1: (True, True, 2), 2: (True, True, 2)})
+    target, _, _ = choose_by_dry_runs(candidates, dry_run)
+    assert target.id == 1, "the first of equals"

@@ -346,9 +346,12 @@ class PlanNode(Node):
             self.errors.error("refused", f"manipulation goal refused: {outcome.message}")
             goal_handle.abort()
             return Manipulate.Result(success=False, message=outcome.message, final_error_m=float("nan"))
+        replays = outcome.result.replays if outcome.result is not None else None
         result = Manipulate.Result(
             success=bool(outcome.success),
             held_in_twin=bool(outcome.result is not None and outcome.result.held),
+            perturbed_twins=int(replays.twins) if replays else 0,
+            perturbed_twins_met=int(replays.met) if replays else 0,
             message=outcome.message,
             final_error_m=float(outcome.final_error_m),
             trajectory=trajectory,

@@ -29,6 +29,7 @@ from arm_planner.mppi import (
     set_sleep,
     state_layout,
 )
+from arm_planner.replay import ReplayConfig, ReplayOutcome, replay_in_perturbed_twins
 from arm_planner.robot_spec import ResolvedRobot, RobotSpec
 from arm_planner.tasks import TASKS
 from arm_planner.tasks.base import RewardWeights, TargetGeometry, TaskSetup
@@ -68,6 +69,8 @@ class PlannerConfig:
 
     mppi: MppiConfig = field(default_factory=MppiConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
+    # An open-loop plan that met the task is replayed in perturbed twins (replay.py).
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
     weights: RewardWeights = field(default_factory=RewardWeights)
     close_steps: int = setting(75, "Grasp: steps the gripper closes for (paper: 75)", 1, 1000)
     grasp_lift_goal_m: float = setting(0.10, "Grasp: the lift the reward aims for, m (success: 0.05)", 0.05, 0.5)
@@ -156,6 +159,8 @@ class PlanResult:
     step_paths: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     # Planning stopped early: the task was met and held for done_hold_steps in the twin.
     held: bool = False
+    # An open-loop plan that met the task, replayed in perturbed twins (none for closed-loop plans).
+    replays: ReplayOutcome = field(default_factory=lambda: ReplayOutcome(0, 0))
 
 
 Feedback = Callable[[int, int, str, float], None]
@@ -355,6 +360,7 @@ class Planner:
         mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
         ctrl = robot.control_from_joints(data.qpos[robot.qpos_adr], reward.gripper_closed, model.nu)
         data.ctrl[:] = ctrl
+        initial_ctrl = ctrl.copy()
         mujoco.mj_kinematics(model, data)
         seen = data.body(request.target_body)
         seen_pos, seen_rot = seen.xpos.copy(), seen.xmat.reshape(3, 3).copy()
@@ -436,6 +442,14 @@ class Planner:
             message = "task met in the twin" if met else "step budget used without meeting the task"
         controls_arr = np.array(controls).reshape(-1, model.nu)
         times = cfg.mppi.control_dt_s * np.arange(1, len(controls_arr) + 1)
+        replays = ReplayOutcome(0, 0)
+        if met and observe is None and stream is None and request.resume_state is None:
+            replays = replay_in_perturbed_twins(
+                model, initial_state, initial_ctrl, controls_arr, self.mppi.rollout.substeps,
+                int(round(cfg.settle_s / model.opt.timestep)), robot.qpos_adr, robot.arm_actuators,
+                lambda end: self.evaluate(reward, end, request.tolerance_m)[0], cfg.replay,
+            )  # fmt: skip
+            message += f"; met in {replays.met} of {replays.twins} perturbed twins" if replays.twins else ""
         return PlanResult(
             success=bool(met),
             message=message,
@@ -449,4 +463,5 @@ class Planner:
             step_cpu_ms=np.array(step_cpu_ms),
             step_paths=np.array(step_paths, dtype=int),
             held=held,
+            replays=replays,
         )
