@@ -13,22 +13,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arm_planner.mppi import MppiConfig
+from arm_planner.replay import ReplayConfig
 from arm_sim import robot
 from arm_sim.world import SimWorld
 
 SETTLE_S = 0.3  # objects moved into a neighbour come apart before the robot moves
 
 
+# The planner's own perturbed twins (arm_planner.replay) draw from the same ranges.
+_REPLAY = ReplayConfig()
+_CONTROL_DT_S = MppiConfig().control_dt_s
+
+
 @dataclass(frozen=True)
 class WorldPerturbation:
     """Ranges of the perturbations (each drawn uniformly)."""
 
-    shift_m: float = 0.005
-    turn_deg: float = 5.0
-    friction_scale: tuple[float, float] = (0.5, 1.5)
-    mass_scale: tuple[float, float] = (0.7, 1.3)
-    latency_s: tuple[float, float] = (0.0, 0.04)
-    joint_offset_deg: float = 0.5
+    shift_m: float = _REPLAY.shift_m
+    turn_deg: float = _REPLAY.turn_deg
+    friction_scale: tuple[float, float] = (1.0 - _REPLAY.friction_spread, 1.0 + _REPLAY.friction_spread)
+    mass_scale: tuple[float, float] = (1.0 - _REPLAY.mass_spread, 1.0 + _REPLAY.mass_spread)
+    latency_s: tuple[float, float] = (0.0, _REPLAY.latency_steps * _CONTROL_DT_S)
+    joint_offset_deg: float = _REPLAY.joint_offset_deg
 
 
 @dataclass(frozen=True)
