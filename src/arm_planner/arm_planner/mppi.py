@@ -104,6 +104,17 @@ class PathBudget:
         return self.paths
 
 
+def ramp_controls(previous: np.ndarray, controls: np.ndarray, substeps: int) -> np.ndarray:
+    """Targets per physics step [N, H * substeps, nu] of control steps [N, H, nu] after `previous` [nu]:
+    linear from the previous control step's target to this one's (what a trajectory controller
+    interpolating the waypoints applies)."""
+    n, h, nu = controls.shape
+    start = np.concatenate([np.broadcast_to(previous, (n, 1, nu)), controls[:, :-1]], axis=1)
+    frac = (np.arange(1, substeps + 1) / substeps)[None, None, :, None]
+    ramp = start[:, :, None] + (controls - start)[:, :, None] * frac
+    return np.ascontiguousarray(ramp.reshape(n, h * substeps, nu))
+
+
 class BatchedRollout:
     """Rolls out [N, H] control-step sequences; returns the state at the end of each control step.
 
@@ -133,13 +144,8 @@ class BatchedRollout:
             mujoco.mj_resetData(model, data)
 
     def substep_controls(self, previous: np.ndarray, controls: np.ndarray) -> np.ndarray:
-        """Targets per physics step [N, H * substeps, nu]: linear from the previous control step's
-        target to this one's (what a trajectory controller interpolating the waypoints applies)."""
-        n, h, nu = controls.shape
-        start = np.concatenate([np.broadcast_to(previous, (n, 1, nu)), controls[:, :-1]], axis=1)
-        frac = (np.arange(1, self.substeps + 1) / self.substeps)[None, None, :, None]
-        ramp = start[:, :, None] + (controls - start)[:, :, None] * frac
-        return np.ascontiguousarray(ramp.reshape(n, h * self.substeps, nu))
+        """Targets per physics step [N, H * substeps, nu] (ramp_controls)."""
+        return ramp_controls(previous, controls, self.substeps)
 
     def __call__(self, initial_state: np.ndarray, controls: np.ndarray, previous: np.ndarray) -> np.ndarray:
         """initial_state [nstate], controls [N, H, nu] after control `previous` [nu] -> states [N, H, nstate]."""

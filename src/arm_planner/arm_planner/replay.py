@@ -22,12 +22,9 @@ import mujoco.rollout
 import numpy as np
 
 from arm_core.settings import setting
-from arm_planner.mppi import state_layout
+from arm_planner.mppi import ramp_controls, state_layout
 
 # Whether a twin state vector (mppi.STATE_SPEC) at a replay's end meets the task.
-Meets = Callable[[np.ndarray], bool]
-
-# Evaluates a twin state vector (STATE_SPEC) of a replay's end: whether it meets the task.
 Meets = Callable[[np.ndarray], bool]
 
 
@@ -152,10 +149,7 @@ def physics_step_controls(
     initial_ctrl = np.asarray(initial_ctrl, dtype=np.float64)
     held = [np.repeat(initial_ctrl[None], late_steps, axis=0), controls]
     held.append(np.repeat(controls[-1:], max_late_steps - late_steps, axis=0))
-    steps = np.vstack(held)
-    start = np.vstack([initial_ctrl[None], steps[:-1]])
-    frac = (np.arange(1, substeps + 1) / substeps)[None, :, None]
-    ramp = (start[:, None] + (steps - start)[:, None] * frac).reshape(-1, len(initial_ctrl))
+    ramp = ramp_controls(initial_ctrl, np.vstack(held)[None], substeps)[0]
     out = np.vstack([np.repeat(initial_ctrl[None], settle_steps, axis=0), ramp])
     out[:, np.asarray(arm_actuators, dtype=int)] += offsets_rad
     return out
