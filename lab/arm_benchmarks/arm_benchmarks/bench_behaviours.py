@@ -1,11 +1,11 @@
 """bench_behaviours: how often each physical behaviour the test suite asserts holds.
 
 The suite asserts a physical outcome (a grasp lifts the lamp upright, a pushed cylinder arrives
-standing, ...) with arm_core.repeated_runs.holds_repeatedly: in 2 of 3 runs whose initial states differ by far
-less than a real robot's uncertainty (objects moved by up to 1e-5 m and 1e-4 rad, MPPI seeded
-differently). This benchmark runs the same tests with every behaviour tried --runs times (no early
-stop) and reports, per behaviour, the share of runs in which it held and the chance that the suite's
-2-of-3 rule fails on a machine whose rounding draws other runs (from that share, runs independent).
+standing, ...) with arm_core.repeated_runs.holds_repeatedly: in NEEDED of up to RUNS runs (2 of 6)
+whose initial states differ by far less than a real robot's uncertainty (objects moved by up to 1e-5 m
+and 1e-4 rad, MPPI seeded differently). This benchmark runs the same tests with every behaviour tried
+--runs times (no early stop) and reports, per behaviour, the share of runs in which it held and the
+chance that the suite's rule fails on a machine whose rounding draws other runs (from that share, runs independent).
 
     bench_behaviours [--runs 10] [--out results/behaviours] [-k EXPRESSION] [TEST_FILE ...]
 

@@ -106,8 +106,15 @@ class WorldSync:
         at = max(step + 1 - self.perturbation.latency_s / self.control_dt_s, 0.0)  # index into _commands
         below = int(np.floor(at))
         above = min(below + 1, len(self._commands) - 1)
-        held = self._commands[below] + (at - below) * (self._commands[above] - self._commands[below])
-        held[: len(robot.JOINT_NAMES)] += self.perturbation.joint_offsets_rad
+        return self.held(self._commands[below] + (at - below) * (self._commands[above] - self._commands[below]))
+
+    def held(self, command: np.ndarray) -> np.ndarray:
+        """What the world's servos hold for a command kept unchanged (7 joints + finger): the command,
+        the arm joints off by the draw's offsets when perturbed (the robot's calibration error stays
+        when the plan ends)."""
+        held = np.asarray(command, dtype=np.float64).copy()
+        if self.perturbation is not None:
+            held[: len(robot.JOINT_NAMES)] += self.perturbation.joint_offsets_rad
         return held
 
     def _encoder_offsets(self) -> np.ndarray:
@@ -228,6 +235,7 @@ def run_in_world(
     result = outcome.result
     if sync is None:
         world.execute(result.times_s, result.joint_positions)
-    world.execute(np.array([HOLD_AFTER_S]), result.joint_positions[-1:])
+    last = result.joint_positions[-1] if sync is None else sync.held(result.joint_positions[-1])
+    world.execute(np.array([HOLD_AFTER_S]), last[None])
     met, error = task_outcome(task, start, world.data.xipos[body].copy(), goal_displacement_m, tolerance_m)
     return WorldRun(met, error, outcome, sync.observations if sync else 0)
