@@ -15,6 +15,8 @@ Voxel (i, j, l) covers [origin + (i, j, l) * voxel_size_m, origin + (i + 1, j + 
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
 from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
@@ -38,6 +40,10 @@ EDGE_INTERIOR_PX = 2
 EDGE_WINDOW_PX = 7
 EDGE_TOLERANCE_M = 0.01
 EDGE_TOLERANCE_PER_M = 0.02
+JUMP_M = 0.03  # neighbouring pixels of one surface differ in depth by less than this
+JUMP_PER_M = 0.03  # plus this share of their depth
+BEHIND_SHARE = 0.2  # a piece cut off by depth jumps, behind the rest, below this share of the mask
+BEHIND_WINDOW_PX = 15  # such a piece lies behind the pixels of the rest this near it
 NORMAL_WINDOW_PX = 5
 
 
@@ -191,8 +197,70 @@ def consistent_object_pixels(depth_m: np.ndarray, labels: np.ndarray) -> np.ndar
         low = np.where(no_interior_near, depth[interior].min(), low)
         high = np.where(no_interior_near, depth[interior].max(), high)
         consistent = (depth >= low - tolerance) & (depth <= high + tolerance)
-        keep[crop] &= ~mask | interior | consistent
+        behind = background_behind(depth, mask, labels[crop] == object_id)
+        keep[crop] &= ~mask | (interior | consistent) & ~behind
     return keep
+
+
+def background_behind(depth_m: np.ndarray, mask: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """HxW bool: the pixels of mask (an object's pixels with depth; region: all its pixels) in pieces
+    that carry the depth of the surface outside the object beside them: a band that the mask took
+    where the sensor registers depth several pixels off the colour image (on a RealSense frame the
+    side of a bottle carried the table's depth 35 cm behind over up to 6 px, at times past pixels
+    without a return), wider than the outline the window test looks at.
+
+    Pieces are 4-connected pixels whose depths differ by under JUMP_M + JUMP_PER_M x depth. A piece
+    other than the largest, on the mask's border and under BEHIND_SHARE of the mask, is such a band
+    when most of its pixels near the largest piece lie behind it by more than a jump and most of its
+    pixels near the outside surface (pixels of other objects or of none, within BEHIND_WINDOW_PX) lie
+    on it (within EDGE_TOLERANCE_M + EDGE_TOLERANCE_PER_M x depth of its mean there). A part of the
+    object that it hides from itself (a lamp's stem under its shade) lies in front of what is behind
+    it and stays."""
+    n = int(mask.sum())
+    index = np.full(mask.shape, -1, dtype=np.int64)
+    index[mask] = np.arange(n)
+    pairs = []
+    for a, b, da, db in (
+        (index[:, :-1], index[:, 1:], depth_m[:, :-1], depth_m[:, 1:]),
+        (index[:-1, :], index[1:, :], depth_m[:-1, :], depth_m[1:, :]),
+    ):
+        joined = (a >= 0) & (b >= 0) & (np.abs(da - db) < JUMP_M + JUMP_PER_M * np.minimum(da, db))
+        pairs.append(np.stack([a[joined], b[joined]], 1))
+    pairs = np.concatenate(pairs)
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    count, piece = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    if count < 2:
+        return np.zeros(mask.shape, dtype=bool)
+    sizes = np.bincount(piece, minlength=count)
+    largest = np.zeros(mask.shape)
+    largest[mask] = piece == np.argmax(sizes)
+    outside = (~region & (depth_m > 0)).astype(np.float64)
+    depth = depth_m[mask]
+    jump = JUMP_M + JUMP_PER_M * depth
+
+    def local_mean(weights):
+        count = ndimage.uniform_filter(weights, BEHIND_WINDOW_PX, mode="constant")[mask]
+        total = ndimage.uniform_filter(weights * depth_m, BEHIND_WINDOW_PX, mode="constant")[mask]
+        return count > 1e-9, total / np.maximum(count, 1e-12)
+
+    near_largest, largest_m = local_mean(largest)
+    near_largest &= largest[mask] == 0
+    near_outside, outside_m = local_mean(outside)
+    behind = near_largest & (depth - largest_m > jump)
+    like_outside = near_outside & (np.abs(depth - outside_m) < EDGE_TOLERANCE_M + EDGE_TOLERANCE_PER_M * depth)
+
+    def share(flags, of):
+        return np.bincount(piece, weights=flags, minlength=count) / np.maximum(
+            np.bincount(piece, weights=of, minlength=count), 1
+        )
+
+    border = mask & ~ndimage.binary_erosion(mask, border_value=0)
+    on_border = np.bincount(piece[index[border]], minlength=count) > 0
+    band = (share(behind, near_largest) > 0.5) & (share(like_outside, near_outside) > 0.5)
+    cut = band & on_border & (sizes < BEHIND_SHARE * n)
+    out = np.zeros(mask.shape, dtype=bool)
+    out[mask] = cut[piece]
+    return out
 
 
 class FrameObservation:

@@ -287,3 +287,34 @@ def test_outline_pixels_with_the_backgrounds_depth_are_not_object_points():
     assert not keep[20:40, 39].any() and not keep[20, 25:30].any()
     assert keep[21:39, 20:39].all() and keep[6:40, 50].all() and not keep[5, 50]
     assert not keep[labels == 0].any()
+
+
+def test_a_band_of_the_backgrounds_depth_several_pixels_wide_along_the_outline_is_left_out():
+    # a RealSense's colour and depth registered up to 5 px apart at 640x480: the mask's side carries
+    # the depth of the table far behind over several pixels
+    table = np.repeat(1.0 - 0.002 * np.arange(80)[:, None], 80, axis=1)  # the table, 0.84-1.0 m away
+    depth = table.copy()
+    labels = np.zeros((80, 80), np.int32)
+    labels[10:70, 20:50] = 1
+    depth[10:70, 20:50] = 0.60 + 0.0005 * np.arange(60)[:, None]  # a bottle's side, 60 cm away
+    depth[10:70, 45:50] = table[10:70, 45:50]  # its outer 5 px: the table behind
+    depth[10:70, 44] = 0.0  # no return between the two
+    keep = consistent_object_pixels(depth, labels)
+    assert not keep[10:70, 45:50].any()
+    assert keep[12:68, 22:44].all()
+
+
+def test_a_curved_limb_and_a_part_seen_past_an_occluder_are_kept():
+    depth = np.full((80, 120), 1.2)
+    labels = np.zeros((80, 120), np.int32)
+    # a cylinder 8 cm across, 60 cm away, one pixel a millimetre: its depth rises steeply at the limbs
+    x = (np.arange(80) - 39.5) / 40.0
+    labels[10:70, 0:80] = 1
+    depth[10:70, 0:80] = 0.60 + 0.04 * (1.0 - np.sqrt(np.clip(1.0 - x**2, 0.0, 1.0)))[None, :]
+    # a stick lying away from the camera, cut in two by a box in front of it: its far end 10 cm behind
+    labels[33:37, 84:87], depth[33:37, 84:87] = 3, 0.72
+    labels[30:40, 87:100], depth[30:40, 87:100] = 2, 0.50
+    labels[33:37, 100:116], depth[33:37, 100:116] = 3, 0.62
+    keep = consistent_object_pixels(depth, labels)
+    assert keep[10:70, 1:79].all()
+    assert keep[33:37, 84:87].all() and keep[33:37, 100:116].all()
