@@ -173,7 +173,9 @@ def consistent_object_pixels(depth_m: np.ndarray, labels: np.ndarray) -> np.ndar
     from its mask's border is kept; one nearer is kept when its depth lies within the range of the
     object's interior depths in the EDGE_WINDOW_PX window around it (widened by EDGE_TOLERANCE_M +
     EDGE_TOLERANCE_PER_M * depth) or, with no interior pixel in that window (a thin part), within the
-    object's interior depth range over the whole mask, equally widened; with no interior at all, kept."""
+    object's interior depth range over the whole mask, equally widened; with no interior at all, kept.
+    Depth registered several pixels off leaves a wider band: background_behind finds it, and it is
+    left out wherever it lies."""
     depth_m, labels = np.asarray(depth_m), np.asarray(labels)
     valid = (labels > 0) & (depth_m > 0)
     keep = valid.copy()
