@@ -59,7 +59,13 @@ class QueueAwareMultiThreadedExecutor(MultiThreadedExecutor):
         for task in list(self._submitted):
             if task.done():
                 del self._submitted[task]
-                task.result()  # raise any exception of the callback
+                try:
+                    task.result()  # raise any exception of the callback
+                except Exception:
+                    # a handler cut short by shutdown (its guard condition already destroyed) has
+                    # nothing to report
+                    if not self._is_shutdown:
+                        raise
 
 
 def result_within(future, timeout_s: float):
