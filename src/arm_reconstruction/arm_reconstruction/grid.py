@@ -238,28 +238,27 @@ def background_behind(depth_m: np.ndarray, mask: np.ndarray, region: np.ndarray)
     largest[mask] = piece == np.argmax(sizes)
     outside = (~region & (depth_m > 0)).astype(np.float64)
     depth = depth_m[mask]
-    jump = JUMP_M + JUMP_PER_M * depth
 
-    def local_mean(weights):
-        count = ndimage.uniform_filter(weights, BEHIND_WINDOW_PX, mode="constant")[mask]
+    def near_and_mean_m(weights):
+        """Per mask pixel: whether weighted pixels lie in its window, and their mean depth (m)."""
+        weight = ndimage.uniform_filter(weights, BEHIND_WINDOW_PX, mode="constant")[mask]
         total = ndimage.uniform_filter(weights * depth_m, BEHIND_WINDOW_PX, mode="constant")[mask]
-        return count > 1e-9, total / np.maximum(count, 1e-12)
+        return weight > 1e-9, total / np.maximum(weight, 1e-12)
 
-    near_largest, largest_m = local_mean(largest)
+    near_largest, largest_m = near_and_mean_m(largest)
     near_largest &= largest[mask] == 0
-    near_outside, outside_m = local_mean(outside)
-    behind = near_largest & (depth - largest_m > jump)
-    like_outside = near_outside & (np.abs(depth - outside_m) < EDGE_TOLERANCE_M + EDGE_TOLERANCE_PER_M * depth)
+    near_outside, outside_m = near_and_mean_m(outside)
+    behind = near_largest & (depth - largest_m > JUMP_M + JUMP_PER_M * depth)
+    on_outside = near_outside & (np.abs(depth - outside_m) < EDGE_TOLERANCE_M + EDGE_TOLERANCE_PER_M * depth)
 
-    def share(flags, of):
-        return np.bincount(piece, weights=flags, minlength=count) / np.maximum(
-            np.bincount(piece, weights=of, minlength=count), 1
-        )
+    def most(flags, of):
+        """Per piece: whether flags hold for more than half of its pixels that `of` marks."""
+        hits = np.bincount(piece, weights=flags, minlength=count)
+        return hits > 0.5 * np.maximum(np.bincount(piece, weights=of, minlength=count), 1)
 
     border = mask & ~ndimage.binary_erosion(mask, border_value=0)
     on_border = np.bincount(piece[index[border]], minlength=count) > 0
-    band = (share(behind, near_largest) > 0.5) & (share(like_outside, near_outside) > 0.5)
-    cut = band & on_border & (sizes < BEHIND_SHARE * n)
+    cut = most(behind, near_largest) & most(on_outside, near_outside) & on_border & (sizes < BEHIND_SHARE * n)
     out = np.zeros(mask.shape, dtype=bool)
     out[mask] = cut[piece]
     return out
