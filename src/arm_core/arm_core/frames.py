@@ -7,10 +7,16 @@ the optical frame, labels HxW integer instance image (0 = background/table; None
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 MIN_IMAGE_SIDE_PX = 4
 ROTATION_TOLERANCE = 1e-3  # max |R R^T - I| entry accepted as a rotation
+SPECKLE_JUMP = 0.03  # neighbouring returns of one surface differ by less than this share of their depth
+SPECKLE_SHARE = 1e-4  # surfaces of fewer pixels than this share of the image (30 at 640x480) are speckles
+SPECKLE_MIN_PX = 4
+_LOG_DEPTH_FLOOR_M = 0.05
+_LOG_DEPTH_STEPS = 8  # code steps per SPECKLE_JUMP, so that rounding moves the jump by under 1/8 of it
 
 
 class FrameInputError(ValueError):
@@ -72,4 +78,38 @@ def validate_frame(depth_m, K, T_world_camera, rgb=None, labels=None) -> RgbdFra
     if not np.allclose(R @ R.T, np.eye(3), atol=ROTATION_TOLERANCE) or np.linalg.det(R) < 0.5:
         raise FrameInputError("T_world_camera rotation is not orthonormal")
     depth_m = np.where(np.isfinite(depth_m) & (depth_m > 0), depth_m, np.float32(0.0))
-    return RgbdFrame(rgb, depth_m, K, T, labels)
+    return RgbdFrame(rgb, remove_speckles(depth_m), K, T, labels)
+
+
+def remove_speckles(depth_m: np.ndarray) -> np.ndarray:
+    """float32 HxW depth (m, 0 = no return) without speckles: returns that the surface around them
+    contradicts.
+
+    A real sensor scatters isolated wrong returns over the image (a RealSense gives single pixels
+    up to 17 m away; sunlight and other cameras' projectors give more). Each would cut the surface it
+    lands on as a depth edge. Returns are joined into surfaces where 4-neighbours differ by under
+    SPECKLE_JUMP of their depth (OpenCV's filterSpeckles, run on log depth so that the jump is
+    relative); a surface of fewer than SPECKLE_SHARE of the image's pixels (at least SPECKLE_MIN_PX)
+    is a speckle when most of the pixels around it are returns of another surface, and becomes no
+    return. Islands of returns among pixels without one (a dark object's last returns) stay, and so
+    do thin structures: a 1 px pole is one surface along its length."""
+    valid = depth_m > 0
+    if not np.any(valid):
+        return depth_m
+    steps = np.log(np.maximum(depth_m[valid], _LOG_DEPTH_FLOOR_M) / _LOG_DEPTH_FLOOR_M)
+    steps *= _LOG_DEPTH_STEPS / np.log1p(SPECKLE_JUMP)
+    code = np.full(depth_m.shape, -1, dtype=np.int16)  # -1: no return, never part of a surface
+    code[valid] = np.minimum(np.round(steps), np.iinfo(np.int16).max).astype(np.int16)
+    max_speckle_px = max(SPECKLE_MIN_PX, round(SPECKLE_SHARE * depth_m.size))
+    cv2.filterSpeckles(code, -1, max_speckle_px, _LOG_DEPTH_STEPS)
+    small = valid & (code < 0)
+    if not np.any(small):
+        return depth_m
+    count, pieces = cv2.connectedComponents(small.astype(np.uint8), connectivity=8)
+    ring_of = cv2.dilate(pieces.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)
+    ring = (ring_of > 0) & ~small
+    ring_px = np.bincount(ring_of[ring], minlength=count)
+    ring_returns = np.bincount(ring_of[ring & valid], minlength=count)
+    speckle = ring_returns > 0.5 * ring_px
+    speckle[0] = False
+    return np.where(speckle[pieces], np.float32(0.0), depth_m)

@@ -61,3 +61,20 @@ def test_bad_frames_raise_one_clear_error(change, message):
     with pytest.raises(FrameInputError, match=message) as error:
         validate_frame(depth, K_bad, T_bad, rgb=rgb, labels=labels)
     assert isinstance(error.value, ValueError)
+
+
+def test_speckles_become_no_return_and_surfaces_stay():
+    depth = np.full((120, 160), 0.8, np.float32)
+    depth[50, 50] = 15.0  # a lone wrong return far behind
+    depth[60, 60:62] = 0.4  # two in front
+    depth[10:110, 100] = 0.5  # a 1 px pole in front of the table
+    depth[80:90, 10:20] = 3.0  # a far surface of 100 px
+    depth[20:30, 20:30] = 0.0  # no return stays no return
+    depth[:, 130:] = np.linspace(0.8, 2.4, 120, dtype=np.float32)[:, None]  # a slope, 1.3 % a row
+    depth[95:115, 30:60] = 0.0  # a dark object that returned almost nothing ...
+    depth[104:106, 44:46] = 0.55  # ... but these four returns, which stay
+    frame = validate_frame(depth, intrinsics(160, 120), T)
+    assert frame.depth_m[50, 50] == 0 and not frame.depth_m[60, 60:62].any()
+    changed = frame.depth_m != depth
+    assert changed.sum() == 3
+    assert validate_frame(frame.depth_m, intrinsics(160, 120), T).depth_m.tolist() == frame.depth_m.tolist()
