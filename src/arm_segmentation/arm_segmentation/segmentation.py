@@ -118,8 +118,9 @@ def empty_reason(labels: np.ndarray, levels: list[SupportLevel], params: Segment
         return ""
     if not levels:
         return (
-            f"no support: no horizontal surface of at least {params.table.min_table_area_m2} m^2 is seen under "
-            "this camera pose (is T_world_camera's z up, and is the table in view?)"
+            f"no support: no horizontal surface of at least {params.table.min_table_area_m2} m^2 (or "
+            f"{params.table.min_table_view_share:.0%} of what the camera sees) is seen under this camera pose (is "
+            "T_world_camera's z up, and is the table in view?)"
         )
     return (
         f"nothing stands on the support at {levels[0].height_m:+.3f} m: no object between the table band and "

@@ -24,6 +24,9 @@ class TableParams:
     min_table_area_m2: float = setting(
         0.05, "Smallest horizontal plane taken as a table, m^2", 0.005, 10.0, parameter=True
     )
+    # a close-up sees less than min_table_area_m2 in all (0.04 m^2 from 0.4 m at fx 1067 px): there a
+    # plane covering this share of the surface seen is a table too
+    min_table_view_share: float = 0.15
     max_levels: int = 3
     band_m: float = 0.006
     band_per_m2: float = 0.003
@@ -76,8 +79,9 @@ def estimate_support_levels(
     """Find up to params.max_levels horizontal support planes, largest first.
 
     points_world, normals_world: HxWx3 (world frame, +z up); area_m2, valid: HxW.
-    Returns an empty list when no upward-facing plane of at least min_table_area_m2 is seen.
+    Returns an empty list when no upward-facing plane of at least min_table_area(area_m2[valid]) is seen.
     """
+    min_area_m2 = min_table_area(area_m2[valid], params)
     cos_tol = np.cos(np.deg2rad(params.horizontal_tolerance_deg))
     up = valid & (normals_world[..., 2] >= cos_tol)
     if not np.any(up):
@@ -94,7 +98,7 @@ def estimate_support_levels(
     levels: list[SupportLevel] = []
     taken = np.zeros(n_bins, dtype=bool)
     for peak in np.argsort(window)[::-1]:
-        if len(levels) >= params.max_levels or window[peak] < params.min_table_area_m2:
+        if len(levels) >= params.max_levels or window[peak] < min_area_m2:
             break
         if taken[peak]:
             continue
@@ -106,15 +110,21 @@ def estimate_support_levels(
         if not np.any(near):
             continue
         height = _weighted_median(z[near], w[near])
-        inliers = _coherent(np.abs(z - height) <= params.band_m, up_y, up_x, w, up.shape, params)
+        inliers = _coherent(np.abs(z - height) <= params.band_m, up_y, up_x, w, up.shape, min_area_m2)
         area = float(w[inliers].sum())
-        if area < params.min_table_area_m2:
+        if area < min_area_m2:
             continue
         hull = _hull(xy[inliers])
         if hull is None:
             continue
         levels.append(SupportLevel(float(height), area, hull[0], hull[1], int(np.count_nonzero(inliers))))
     return levels
+
+
+def min_table_area(seen_area_m2: np.ndarray, params: TableParams) -> float:
+    """Smallest plane (m^2) taken as a table in a view whose pixels with depth cover seen_area_m2:
+    min_table_area_m2, or min_table_view_share of all the view sees where that is less (a close-up)."""
+    return min(params.min_table_area_m2, params.min_table_view_share * float(np.sum(seen_area_m2)))
 
 
 def workspace_levels(levels: list[SupportLevel], params: TableParams = TableParams()) -> list[SupportLevel]:
@@ -200,12 +210,12 @@ def classify_points(
     return classify_heights(points_world[..., 2], depth_m, support, params)
 
 
-def _coherent(inliers, ys, xs, weights, shape, params: TableParams) -> np.ndarray:
+def _coherent(inliers, ys, xs, weights, shape, min_area_m2: float) -> np.ndarray:
     """Keep the inliers that belong to large connected regions of the image.
 
     A plane seen as many small patches at one height (the tops of equal boxes) is no table: the
-    largest region must reach min_table_area_m2, and only regions of at least a tenth of that
-    take part in the footprint.
+    largest region must reach min_area_m2, and only regions of at least a tenth of that take part
+    in the footprint.
     """
     image = np.zeros(shape, dtype=bool)
     image[ys[inliers], xs[inliers]] = True
@@ -215,9 +225,9 @@ def _coherent(inliers, ys, xs, weights, shape, params: TableParams) -> np.ndarra
     region_of = regions[ys, xs]
     region_area = np.bincount(region_of, weights=np.where(inliers, weights, 0.0), minlength=n + 1)
     region_area[0] = 0.0
-    if region_area.max() < params.min_table_area_m2:
+    if region_area.max() < min_area_m2:
         return np.zeros_like(inliers)
-    return inliers & (region_area[region_of] >= 0.1 * params.min_table_area_m2)
+    return inliers & (region_area[region_of] >= 0.1 * min_area_m2)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:

@@ -13,6 +13,7 @@ from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.camera_pose_estimate import estimate_camera_pose
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame, segment_messages
 from arm_segmentation.metrics import segmentation_metrics
+from arm_segmentation.segmentation import segment_detailed
 
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
 BOXES = [
@@ -104,3 +105,16 @@ def test_frame_without_pose_segments_with_the_estimated_pose():
     pose = PoseStamped(pose=matrix_to_pose(decoded.T_world_camera))
     frame, _ = segment_frame(decoded, depth_msg, info, pose)
     assert segmentation_metrics(image_to_numpy(frame.labels), gt)["overlap_f"] > 0.9
+
+
+def test_a_close_up_that_sees_less_table_than_the_area_threshold_finds_its_objects():
+    # a desk close-up (0.35 m above it, fx 1067 px at 640x480): the view covers under 0.05 m^2 of the desk
+    K = np.array([[1067.0, 0.0, 319.5], [0.0, 1067.0, 239.5], [0.0, 0.0, 1.0]])
+    camera = look_at((-0.12, 0.0, 0.35), (0.0, 0.0, 0.0))
+    boxes = [Box((-0.03, -0.04, 0.02), (0.02, 0.015, 0.02)), Box((0.03, 0.03, 0.025), (0.015, 0.02, 0.025), 0.4)]
+    rgb, depth, gt, _ = render(boxes, camera, K=K)
+    depth = add_noise(depth, np.random.default_rng(5))
+    T = estimate_camera_pose(depth, K).T_world_camera
+    result = segment_detailed(rgb, depth, K, T)
+    assert result.empty_reason == "" and len(result.levels) == 1 and result.levels[0].area_m2 < 0.05
+    assert segmentation_metrics(result.labels, gt)["overlap_f"] > 0.85
