@@ -16,7 +16,11 @@ per set it reports:
   background false positives), averaged per image;
 - stability under sensor noise: the depth re-encoded noise_copies times (the simulator's depth-noise
   model plus +-1 mm quantisation); the largest change of the support (degrees, metres) and of the
-  instance count against the frame as given.
+  instance count against the frame as given;
+- the frame as other cameras would give it (arm_benchmarks.real.camera_variants: a 1.7x longer lens,
+  twice and half the resolution, speckled depth; off with --no-camera-variants): support found and
+  the instance count against the frame's own instances still in view, and the UOIS metrics where
+  labelled.
 Writes OUT/summary.json, OUT/report.md, OUT/<set>/sheets/<frame>.png (overlay | scene from the camera
 after the physics | from the side) and the frames' reconstruct_frames outputs under OUT/<set>/frames/.
 A frame whose bench.json exists is not redone (resume), unless --overwrite.
@@ -35,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from arm_benchmarks.machine import machine_description
+from arm_benchmarks.real.camera_variants import camera_variants, kept_instances
 from arm_benchmarks.real.scene_physics import (
     STABLE_MOVE_M,
     STABLE_TURN_DEG,
@@ -76,6 +81,9 @@ def parse_args(argv=None):
     parser.add_argument("--max-frames", type=int, default=0, help="first N frames of each folder (0: all)")
     parser.add_argument("--depth-scale", type=float, default=0.001, help="metres per depth unit")
     parser.add_argument("--seed", type=int, default=0, help="seed of the depth noise")
+    parser.add_argument(
+        "--no-camera-variants", action="store_true", help="skip the frames as other cameras would give them"
+    )
     parser.add_argument("--overwrite", action="store_true", help="redo frames already benchmarked")
     args = parser.parse_args(argv)
     for folder in args.folders:
@@ -161,6 +169,53 @@ def contact_sheet(overlay_rgb: np.ndarray, views: list[np.ndarray], titles: list
     return np.hstack([np.pad(t, ((0, height - t.shape[0]), (0, 0), (0, 0))) for t in tiles])
 
 
+def variant_checks(rgb, depth_m, K, truth, predicted, processor, rng) -> list[dict]:
+    """The segmentation on each camera variant of the frame (real.camera_variants): support found,
+    instances against the reference (the frame's own instances that stay in view), and with truth
+    labels the UOIS metrics; held when a support is found and the count is within one of the reference."""
+    labels = [predicted] if truth is None else [predicted, truth]
+    rows = []
+    for variant in camera_variants(rgb, depth_m, K, labels, rng):
+        scale_px = variant.depth_m.size / depth_m.size
+        row = {"variant": variant.name, "reference": kept_instances(predicted, variant.labels[0], scale_px)}
+        try:
+            T, _ = camera_pose(variant.depth_m, variant.K, None)
+        except CameraPoseError as error:
+            rows.append(row | {"support_found": False, "instances": 0, "held": False, "empty_reason": str(error)})
+            continue
+        result = segment_detailed(variant.rgb, variant.depth_m, variant.K, T, processor.settings.segmentation)
+        count = len(np.unique(result.labels[result.labels > 0]))
+        row |= {"support_found": True, "instances": count, "empty_reason": result.empty_reason}
+        row["held"] = abs(count - row["reference"]) <= NOISE_TARGET_INSTANCES
+        if truth is not None:
+            metrics = segmentation_metrics(result.labels, variant.labels[1])
+            row["metrics"] = {k: float(metrics[k]) for k in METRIC_KEYS}
+        rows.append(row)
+    return rows
+
+
+def aggregate_variants(rows: list[dict]) -> dict:
+    """Per camera variant over a set's frames: support found, frames with an instance in view that came
+    back empty, held share, mean instance count change, and the mean UOIS metrics where labelled."""
+    by_name: dict[str, list[dict]] = {}
+    for r in rows:
+        for v in r.get("variants", []):
+            by_name.setdefault(v["variant"], []).append(v)
+    out = {}
+    for name, vs in by_name.items():
+        labelled = [v["metrics"] for v in vs if "metrics" in v]
+        out[name] = {
+            "frames": len(vs),
+            "support_found": sum(v["support_found"] for v in vs),
+            "empty_with_objects": sum(v["instances"] == 0 and v["reference"] > 0 for v in vs),
+            "held_fraction": mean([v["held"] for v in vs]),
+            "mean_instance_change": mean([abs(v["instances"] - v["reference"]) for v in vs]),
+        }
+        if labelled:
+            out[name]["metrics"] = {k: mean([m[k] for m in labelled]) for k in METRIC_KEYS}
+    return out
+
+
 def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng) -> dict:
     """One frame through the offline command, its scene's physics, its labels and the noisy copies."""
     folder = out_set / "frames" / files.name
@@ -202,8 +257,8 @@ def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng
     predicted = cv2.imread(str(folder / "labels.png"), cv2.IMREAD_UNCHANGED)
     row["on_support_share"] = on_support_share(predicted, depth_m, camera.K, T_world_camera)
     labels_path = files.colour[0].parent.parent / LABELS_DIR / f"{files.name}.png"
-    if labels_path.is_file():
-        truth = cv2.imread(str(labels_path), cv2.IMREAD_UNCHANGED)
+    truth = cv2.imread(str(labels_path), cv2.IMREAD_UNCHANGED) if labels_path.is_file() else None
+    if truth is not None:
         metrics = segmentation_metrics(predicted, truth)
         row["metrics"] = {k: float(metrics[k]) for k in METRIC_KEYS} | {"n_gt": metrics["n_gt"]}
         if not np.any((truth > 0) & (depth_m <= 0)):
@@ -213,6 +268,8 @@ def bench_frame(files, camera, pose, out_set: pathlib.Path, processor, args, rng
     row["noise"] = noise_stability(
         rgb, depth_m, camera.K, T_world_camera, row["instances"], processor, args.noise_copies, rng
     )
+    if not args.no_camera_variants:
+        row["variants"] = variant_checks(rgb, depth_m, camera.K, truth, predicted, processor, rng)
     centres = [data.xpos[model.body(m.body).id] for m in motions]
     target = np.mean(centres, axis=0) if centres else np.zeros(3)
     poses = [T_world_camera, side_view_pose(T_world_camera, target)]
@@ -269,6 +326,9 @@ def aggregate(rows: list[dict]) -> dict:
         out["metrics"] = {k: mean([m[k] for m in labelled]) for k in METRIC_KEYS} | {"frames": len(labelled)}
     if on_depth:
         out["metrics_on_depth"] = {k: mean([m[k] for m in on_depth]) for k in METRIC_KEYS} | {"frames": len(on_depth)}
+    variants = aggregate_variants(ok)
+    if variants:
+        out["camera_variants"] = variants
     return out
 
 
@@ -324,6 +384,7 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
                 f"{_fmt(n['max_height_change_m'], 1000, 1)} mm; instance count at most {n['max_instance_change']} "
                 f"off; {n['failed_copies']} copies without a support"
             )
+        lines += variant_lines(s.get("camera_variants", {}))
         lines += [
             "",
             "| frame | h (m) | inliers | instances | stable | noise: deg / mm / count | overlap F | sheet |",
@@ -342,6 +403,28 @@ def write_report(path: pathlib.Path, summary: dict) -> None:
                 f"{r['instances']} | {stable} | {noise} | {_fmt(r.get('metrics', {}).get('overlap_f'))} | {sheet} |"
             )
     path.write_text("\n".join(lines) + "\n")
+
+
+def variant_lines(variants: dict) -> list[str]:
+    """The report's table of the camera variants of one set ([] without them)."""
+    if not variants:
+        return []
+    lines = [
+        "",
+        "As other cameras would give these frames (`arm_benchmarks.real.camera_variants`); held: a support "
+        "found and the instance count within one of the frame's own instances still in view:",
+        "",
+        "| camera | support found | empty with objects in view | held | mean count change | overlap F | F@75 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, v in variants.items():
+        m = v.get("metrics", {})
+        lines.append(
+            f"| {name} | {v['support_found']}/{v['frames']} | {v['empty_with_objects']} | "
+            f"{_fmt(v['held_fraction'], digits=2)} | {_fmt(v['mean_instance_change'], digits=2)} | "
+            f"{_fmt(m.get('overlap_f'))} | {_fmt(m.get('f_at_75'))} |"
+        )
+    return lines
 
 
 def bench_set(folder: pathlib.Path, processor, args) -> list[dict]:

@@ -71,6 +71,10 @@ def test_reports_support_scene_physics_metrics_and_noise_and_resumes(labelled_fo
     assert 0.0 <= totals["stable_fraction"] <= 1.0 and totals["noise"]["frames"] == 1
     assert 0.0 <= totals["on_support_share"] < 0.2
     assert totals["metrics"]["overlap_f"] > 0.5 and totals["metrics"]["frames"] == 1
+    variants = totals["camera_variants"]
+    assert set(variants) == {"zoom_1.7x", "640x480", "160x120", "speckles"}
+    assert all(v["frames"] == 1 and "overlap_f" in v["metrics"] for v in variants.values())
+    assert variants["speckles"]["support_found"] == 1 and variants["640x480"]["support_found"] == 1
     row = summary["frames"][labelled_folder.name][0]
     assert abs(row["normal_camera"][1]) > 0.3 and row["camera_height_m"] > 0.3
     assert (out / row["sheet"]).is_file() and "| 000000 |" in (out / "report.md").read_text()
