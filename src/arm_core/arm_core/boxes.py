@@ -1,4 +1,5 @@
-"""The box around a mask's pixels: one helper for every crop (segmentation's fine pass, figures)."""
+"""The box around a mask's pixels: one helper for every crop (segmentation's fine pass, figures),
+and the intrinsics of a cropped or resized image."""
 
 from __future__ import annotations
 
@@ -30,3 +31,13 @@ def cropped_intrinsics(K: np.ndarray, crop: tuple[slice, slice]) -> np.ndarray:
     K_crop[0, 2] -= crop[1].start
     K_crop[1, 2] -= crop[0].start
     return K_crop
+
+
+def resized_intrinsics(K: np.ndarray, from_shape: tuple[int, int], to_shape: tuple[int, int]) -> np.ndarray:
+    """The pinhole K of an image with intrinsics K resized from from_shape to to_shape (rows, cols);
+    pixel centres at integer coordinates, as OpenCV's resize places them."""
+    sy, sx = to_shape[0] / from_shape[0], to_shape[1] / from_shape[1]
+    K_resized = np.array(K, dtype=np.float64)
+    K_resized[0, 0], K_resized[0, 1], K_resized[0, 2] = K[0, 0] * sx, K[0, 1] * sx, (K[0, 2] + 0.5) * sx - 0.5
+    K_resized[1, 1], K_resized[1, 2] = K[1, 1] * sy, (K[1, 2] + 0.5) * sy - 0.5
+    return K_resized

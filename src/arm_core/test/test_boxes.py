@@ -1,6 +1,6 @@
 import numpy as np
 
-from arm_core.boxes import mask_box
+from arm_core.boxes import mask_box, resized_intrinsics
 
 
 def test_box_spans_the_mask_with_the_margin_and_stays_inside_the_image():
@@ -28,3 +28,10 @@ def test_box_of_a_label_image_is_the_grown_bounding_box_of_its_instances_clipped
     labels[2:5, 30:38] = 1
     labels[10, 12] = 2
     assert mask_box(labels, 3) == (slice(0, 14), slice(9, 40))
+
+
+def test_resized_intrinsics_keep_each_ray_on_its_pixel():
+    K = np.array([[600.0, 0.0, 319.5], [0.0, 610.0, 239.5], [0.0, 0.0, 1.0]])
+    half = resized_intrinsics(K, (480, 640), (240, 320))
+    assert np.allclose(half, [[300.0, 0.0, 159.5], [0.0, 305.0, 119.5], [0.0, 0.0, 1.0]])
+    assert np.allclose(resized_intrinsics(half, (240, 320), (480, 640)), K)

@@ -13,7 +13,7 @@ from arm_ros.conversions.poses import matrix_to_pose
 from arm_segmentation.camera_pose_estimate import estimate_camera_pose
 from arm_segmentation.frame_processing import FrameError, decode_camera_frame, segment_frame, segment_messages
 from arm_segmentation.metrics import segmentation_metrics
-from arm_segmentation.segmentation import segment_detailed
+from arm_segmentation.segmentation import reference_factor, segment_detailed
 
 CAMERA = look_at((-0.45, 0.1, 0.6), (0.05, 0.0, 0.0))
 BOXES = [
@@ -118,3 +118,16 @@ def test_a_close_up_that_sees_less_table_than_the_area_threshold_finds_its_objec
     result = segment_detailed(rgb, depth, K, T)
     assert result.empty_reason == "" and len(result.levels) == 1 and result.levels[0].area_m2 < 0.05
     assert segmentation_metrics(result.labels, gt)["overlap_f"] > 0.85
+
+
+def test_frames_far_larger_than_the_reference_size_are_segmented_subsampled_to_it():
+    assert reference_factor((480, 640), 640 * 480) == 1 and reference_factor((480, 848), 640 * 480) == 1
+    assert reference_factor((720, 1280), 640 * 480) == 2 and reference_factor((1080, 1920), 640 * 480) == 3
+    assert reference_factor((240, 320), 640 * 480) == 1
+    rgb, depth, gt, K = render(BOXES, CAMERA, width=1280, height=960)
+    exclude = np.zeros(depth.shape, bool)
+    exclude[gt == 3] = True  # the robot's arm over the third box: never an object
+    result = segment_detailed(rgb, add_noise(depth, np.random.default_rng(1)), K, CAMERA, exclude=exclude)
+    assert result.labels.shape == depth.shape and result.table_mask.shape == depth.shape
+    assert not result.labels[exclude].any() and len(np.unique(result.labels[result.labels > 0])) == 2
+    assert segmentation_metrics(result.labels, np.where(exclude, 0, gt))["overlap_f"] > 0.9

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from arm_core.boxes import cropped_intrinsics
+from arm_core.boxes import cropped_intrinsics, resized_intrinsics
 
 ZOOM = 1.7
 SPECKLE_SHARE = 0.005
@@ -39,11 +39,8 @@ class VariantFrame:
 def _resized(rgb, depth_m, K, labels, size_wh: tuple[int, int]):
     """Every image resampled to size_wh (width, height); K scaled with it."""
     w, h = size_wh
-    sx, sy = w / depth_m.shape[1], h / depth_m.shape[0]
-    K = K.copy()
-    K[0, 0], K[0, 2] = K[0, 0] * sx, (K[0, 2] + 0.5) * sx - 0.5
-    K[1, 1], K[1, 2] = K[1, 1] * sy, (K[1, 2] + 0.5) * sy - 0.5
-    colour = cv2.INTER_AREA if sx < 1 else cv2.INTER_LINEAR
+    K = resized_intrinsics(K, depth_m.shape, (h, w))
+    colour = cv2.INTER_AREA if w < depth_m.shape[1] else cv2.INTER_LINEAR
     nearest = [cv2.resize(image, (w, h), interpolation=cv2.INTER_NEAREST) for image in (depth_m, *labels)]
     return cv2.resize(rgb, (w, h), interpolation=colour), nearest[0], K, nearest[1:]
 
