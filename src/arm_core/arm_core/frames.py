@@ -96,10 +96,12 @@ def remove_speckles(depth_m: np.ndarray) -> np.ndarray:
     valid = depth_m > 0
     if not np.any(valid):
         return depth_m
-    steps = np.log(np.maximum(depth_m[valid], _LOG_DEPTH_FLOOR_M) / _LOG_DEPTH_FLOOR_M)
-    steps *= _LOG_DEPTH_STEPS / np.log1p(SPECKLE_JUMP)
-    code = np.full(depth_m.shape, -1, dtype=np.int16)  # -1: no return, never part of a surface
-    code[valid] = np.minimum(np.round(steps), np.iinfo(np.int16).max).astype(np.int16)
+    # log depth in steps of SPECKLE_JUMP / _LOG_DEPTH_STEPS (any finite float32 depth fits an int16)
+    steps = cv2.log(np.maximum(depth_m, np.float32(_LOG_DEPTH_FLOOR_M)))
+    steps -= np.float32(np.log(_LOG_DEPTH_FLOOR_M))
+    steps *= np.float32(_LOG_DEPTH_STEPS / np.log1p(SPECKLE_JUMP))
+    code = np.rint(steps).astype(np.int16)
+    code[~valid] = -1  # no return, never part of a surface
     max_speckle_px = max(SPECKLE_MIN_PX, round(SPECKLE_SHARE * depth_m.size))
     cv2.filterSpeckles(code, -1, max_speckle_px, _LOG_DEPTH_STEPS)
     small = valid & (code < 0)
