@@ -1,7 +1,14 @@
+import pathlib
+
+import cv2
 import numpy as np
+import pytest
 
 from arm_benchmarks.real.camera_variants import SPECKLE_RANGE_M, camera_variants, kept_instances, speckled, zoomed
 from arm_core.camera import backproject_image
+from arm_offline.inputs import find_intrinsics, load_camera
+from arm_segmentation.camera_pose_estimate import estimate_camera_pose
+from arm_segmentation.segmentation import segment_detailed
 
 
 def _frame():
@@ -40,3 +47,19 @@ def test_every_variant_keeps_colour_depth_and_labels_aligned():
         h, w = variant.depth_m.shape
         assert variant.rgb.shape == (h, w, 3) and variant.labels[0].shape == (h, w)
         assert abs(variant.K[0, 2] - (w - 1) / 2) < 1.0 and abs(variant.K[1, 2] - (h - 1) / 2) < 1.0
+
+
+SHARED_REAL = pathlib.Path(__file__).resolve().parents[3] / ".." / "shared" / "real"
+
+
+@pytest.mark.skipif(not (SHARED_REAL / "ycb_tables").is_dir(), reason="needs ../shared/real (not in a user's clone)")
+def test_through_a_longer_lens_the_objects_at_the_image_edge_stand_on_the_table():
+    folder = SHARED_REAL / "ycb_tables"
+    camera = load_camera(find_intrinsics(folder))
+    rgb = cv2.imread(str(folder / "color" / "000000.png"))[..., ::-1].copy()
+    depth = cv2.imread(str(folder / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 1000.0
+    rgb, depth, K, _ = zoomed(rgb, depth, camera.K, [], 1.7)
+    result = segment_detailed(rgb, depth, K, estimate_camera_pose(depth, K).T_world_camera)
+    # in view: a bottle, a cracker box at the right edge, a bowl and a brick (and a sliver of a sugar box)
+    assert 4 <= len(np.unique(result.labels[result.labels > 0])) <= 5
+    assert result.labels[100:200, 450:560].any(), "the cracker box at the image's right edge is an object"

@@ -110,7 +110,8 @@ def estimate_support_levels(
         if not np.any(near):
             continue
         height = _weighted_median(z[near], w[near])
-        inliers = _coherent(np.abs(z - height) <= params.band_m, up_y, up_x, w, up.shape, min_area_m2)
+        in_band = valid & (np.abs(points_world[..., 2] - height) <= params.band_m)
+        inliers = _coherent(np.abs(z - height) <= params.band_m, up_y, up_x, w, in_band, min_area_m2)
         area = float(w[inliers].sum())
         if area < min_area_m2:
             continue
@@ -210,16 +211,17 @@ def classify_points(
     return classify_heights(points_world[..., 2], depth_m, support, params)
 
 
-def _coherent(inliers, ys, xs, weights, shape, min_area_m2: float) -> np.ndarray:
+def _coherent(inliers, ys, xs, weights, in_band, min_area_m2: float) -> np.ndarray:
     """Keep the inliers that belong to large connected regions of the image.
 
     A plane seen as many small patches at one height (the tops of equal boxes) is no table: the
     largest region must reach min_area_m2, and only regions of at least a tenth of that take part
-    in the footprint.
+    in the footprint. Regions are connected through every pixel at the level's height (in_band, HxW
+    bool), also where noisy normals do not face up: a real sensor's table is one region, not specks.
     """
-    image = np.zeros(shape, dtype=bool)
+    image = np.zeros(in_band.shape, dtype=bool)
     image[ys[inliers], xs[inliers]] = True
-    regions, n = ndimage.label(image, structure=np.ones((3, 3), bool))
+    regions, n = ndimage.label(image | in_band, structure=np.ones((3, 3), bool))
     if n == 0:
         return np.zeros_like(inliers)
     region_of = regions[ys, xs]
