@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from arm_core.boxes import mask_box
+from arm_core.vectors import channel_sum
 
 
 @dataclass(frozen=True)
@@ -83,8 +84,8 @@ def _refine(labels: np.ndarray, rgb: np.ndarray, params: BorderParams) -> np.nda
     colour = cv2.blur(rgb, (params.blur_px, params.blur_px)).astype(np.float32) if params.blur_px > 1 else rgb
     colour = np.asarray(colour, dtype=np.float32)
     pixel = rgb[band.rows, band.cols].astype(np.float32)
-    to_object = np.abs(pixel - colour[band.inside_rows, band.inside_cols]).sum(axis=1)
-    to_background = np.abs(pixel - colour[band.outside_rows, band.outside_cols]).sum(axis=1)
+    to_object = channel_sum(np.abs(pixel - colour[band.inside_rows, band.inside_cols]))
+    to_background = channel_sum(np.abs(pixel - colour[band.outside_rows, band.outside_cols]))
     is_object = to_object + params.margin < to_background
     out = labels.copy()
     out[band.rows, band.cols] = np.where(is_object, band.candidate, 0)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arm_core.camera import backproject_image, pixel_coordinates
+from arm_core.vectors import vector_length
 
 
 class CameraPoseError(ValueError):
@@ -91,7 +92,7 @@ def _ransac(points: np.ndarray, threshold_m: np.ndarray, rng: np.random.Generato
     point near one image line whatever its depth, and outscore a narrow strip of table."""
     triples = points[rng.integers(0, len(points), size=(params.hypotheses, 3))]
     normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
+    norms = vector_length(normals)
     ok = norms > 1e-9
     normals = normals[ok] / norms[ok, None]
     offsets = -np.einsum("hk,hk->h", normals, triples[ok, 0])
@@ -102,7 +103,7 @@ def _ransac(points: np.ndarray, threshold_m: np.ndarray, rng: np.random.Generato
     points = points.astype(np.float32)  # scoring only: float32 halves the (N, H) work
     distances = np.abs(points @ normals.T + offsets)  # (N, H)
     # |offset| / range is the cosine of the incidence angle of a point on the plane
-    seen = np.abs(offsets) >= np.cos(np.radians(params.max_incidence_deg)) * np.linalg.norm(points, axis=1)[:, None]
+    seen = np.abs(offsets) >= np.cos(np.radians(params.max_incidence_deg)) * vector_length(points)[:, None]
     # each inlier counts with its depth^2, the area it covers facing the camera: near clutter
     # (many pixels, little area) does not outvote the table
     scores = ((distances < threshold_m[:, None]) & seen).T @ (points[:, 2] ** 2)
@@ -123,7 +124,7 @@ def _refine(points: np.ndarray, threshold_m: np.ndarray, plane: np.ndarray, iter
 
 def _plane_area_m2(points: np.ndarray, plane: np.ndarray, fx_fy: float, scale: float) -> float:
     """Area of the plane covered by points (one subsampled pixel stands for `scale` pixels)."""
-    ranges = np.linalg.norm(points, axis=1)
+    ranges = vector_length(points)
     cos = np.abs(points @ plane[:3]) / np.maximum(ranges, 1e-9)
     return float(scale * np.sum(points[:, 2] ** 2 / fx_fy / np.maximum(cos, 0.2)))
 
@@ -150,7 +151,7 @@ def valid_points(
     depth_m = np.asarray(depth_m, dtype=np.float32)
     valid = (np.isfinite(depth_m) & (depth_m > 0)).ravel()
     points = backproject_image(np.where(valid.reshape(depth_m.shape), depth_m, 0.0), K).reshape(-1, 3)[valid]
-    points = points[np.linalg.norm(points, axis=1) <= max_range_m]
+    points = points[vector_length(points) <= max_range_m]
     n_valid = len(points)
     if len(points) > max_points:
         points = points[rng.choice(len(points), max_points, replace=False)]

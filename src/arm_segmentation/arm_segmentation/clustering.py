@@ -25,6 +25,7 @@ from scipy.sparse.csgraph import connected_components
 
 from arm_core.boxes import mask_box
 from arm_core.settings import setting
+from arm_core.vectors import channel_sum, vector_length
 from arm_segmentation.label_stats import label_maximum, label_minimum
 
 # Rings the last flood grows into geometric edge pixels: wider than the band separating_edges marks.
@@ -78,7 +79,7 @@ def chromaticity(rgb: np.ndarray, blur: int = 3) -> np.ndarray:
 def channel_mean(image: np.ndarray) -> np.ndarray:
     """HxW mean of an HxWx3 float image's channels (the same values as image.mean(axis=2), without
     numpy's slow reduction over a short last axis)."""
-    return (image[..., 0] + image[..., 1] + image[..., 2]) / image.dtype.type(3)
+    return channel_sum(image) / image.dtype.type(3)
 
 
 def hue_distance(a: np.ndarray, b: np.ndarray, saturation_weight: float = 0.3) -> np.ndarray:
@@ -87,10 +88,10 @@ def hue_distance(a: np.ndarray, b: np.ndarray, saturation_weight: float = 0.3) -
     Both vectors are shortened to the smaller length before comparing, so a shadow or a clipped
     highlight of a surface (same hue, other saturation) stays close to it.
     """
-    sa = np.linalg.norm(a, axis=-1, keepdims=True)
-    sb = np.linalg.norm(b, axis=-1, keepdims=True)
+    sa = vector_length(a)[..., None]
+    sb = vector_length(b)[..., None]
     common = np.minimum(sa, sb)
-    hue = np.abs(a * (common / np.maximum(sa, 1e-6)) - b * (common / np.maximum(sb, 1e-6))).sum(axis=-1)
+    hue = channel_sum(np.abs(a * (common / np.maximum(sa, 1e-6)) - b * (common / np.maximum(sb, 1e-6))))
     return hue + saturation_weight * np.abs(sa - sb)[..., 0]
 
 
@@ -135,7 +136,7 @@ def separating_edges(points_camera, normals_camera, depth_m, chroma, mask, norma
                 geometric[end] |= wide
                 edge[end] |= wide
         if chroma is not None:
-            cut |= np.abs(chroma[a] - chroma[b]).sum(axis=-1) > params.chroma_edge_threshold
+            cut |= channel_sum(np.abs(chroma[a] - chroma[b])) > params.chroma_edge_threshold
         cut &= mask[a] & mask[b]
         edge[a] |= cut
         edge[b] |= cut
@@ -147,7 +148,7 @@ def _concave(points_camera, normals_camera, normal_valid, a, b, threshold: float
     normals turning towards each other by more than threshold along the step."""
     d = points_camera[a] - points_camera[b]
     dn = normals_camera[a] - normals_camera[b]
-    convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(np.linalg.norm(d, axis=-1), 1e-6)
+    convexity = np.einsum("hwc,hwc->hw", dn, d) / np.maximum(vector_length(d), 1e-6)
     return (convexity < -threshold) & normal_valid[a] & normal_valid[b]
 
 
@@ -228,7 +229,7 @@ def flood(labels: np.ndarray, mask: np.ndarray, chroma: np.ndarray, iterations: 
         if len(gy) == 0:
             break
         owner = grown[gy, gx].astype(np.int64)
-        ok = np.abs(chroma[gy, gx] - means[owner]).sum(axis=1) <= max_chroma
+        ok = channel_sum(np.abs(chroma[gy, gx] - means[owner])) <= max_chroma
         if not np.any(ok):
             break
         out[gy[ok], gx[ok]] = owner[ok]
@@ -442,7 +443,7 @@ def grow_instances(labels, depth_m, chroma, candidates, table_chroma, params: Cl
     ys, xs = np.nonzero(near)
     owner = labels[iy[ys, xs], ix[ys, xs]]
     pixel_chroma = chroma[ys, xs]
-    to_instance = np.abs(pixel_chroma - means[owner]).sum(axis=1)
+    to_instance = channel_sum(np.abs(pixel_chroma - means[owner]))
     ok = to_instance <= params.grow_chroma_threshold
     if table_chroma is not None:
         ok &= to_instance < hue_distance(pixel_chroma, table_chroma[ys, xs])

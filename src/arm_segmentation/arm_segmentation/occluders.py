@@ -14,6 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from arm_core.camera import ray_directions_world
+from arm_core.vectors import vector_length
 from arm_segmentation.clustering import chromaticity, hue_distance
 from arm_segmentation.table_plane import SupportLevel, extend_towards
 
@@ -41,7 +42,7 @@ def expected_table(ys, xs, K: np.ndarray, T: np.ndarray, level: SupportLevel, pa
     dz = direction[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         depth = np.float32(level.height_m - T[2, 3]) / dz
-    cos_incidence = np.abs(dz) / np.linalg.norm(direction, axis=-1)
+    cos_incidence = np.abs(dz) / vector_length(direction)
     ok = (dz < 0) & (depth >= params.min_table_range_m) & (depth <= params.max_table_range_m)
     ok &= cos_incidence >= params.min_cos_incidence
     hit = T[:2, 3].astype(np.float32) + direction[:, :2] * np.where(ok, depth, 0.0)[:, None]

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from arm_core.boxes import mask_box
+from arm_core.vectors import channel_sum
 from arm_segmentation.boundary import OutlineBand, outline_band
 from arm_segmentation.clustering import channel_mean
 from arm_segmentation.perceptron import Perceptron, shared_perceptron
@@ -113,10 +114,10 @@ def outline_features(labels: np.ndarray, image: OutlineImage, band: OutlineBand)
         pixel,
         inside,
         outside,
-        np.abs(pixel - inside).sum(axis=1),
-        np.abs(pixel - outside).sum(axis=1),
-        np.abs(blurred - inside).sum(axis=1),
-        np.abs(blurred - outside).sum(axis=1),
+        channel_sum(np.abs(pixel - inside)),
+        channel_sum(np.abs(pixel - outside)),
+        channel_sum(np.abs(blurred - inside)),
+        channel_sum(np.abs(blurred - outside)),
         signed,
         has,
         has_in,

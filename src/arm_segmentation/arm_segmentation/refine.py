@@ -13,6 +13,7 @@ import numpy as np
 
 from arm_core.boxes import cropped_intrinsics
 from arm_core.camera import world_height
+from arm_core.vectors import channel_sum
 from arm_segmentation.clustering import chromaticity, hue_distance
 from arm_segmentation.table_plane import TableParams, band_for_depth
 
@@ -118,7 +119,7 @@ def refine_full_resolution(
             break
         owner = grown[gy, gx]
         pixel = chroma[gy, gx]
-        to_instance = np.abs(pixel - means[owner]).sum(axis=1)
+        to_instance = channel_sum(np.abs(pixel - means[owner]))
         if table_chroma is not None:
             to_table = hue_distance(pixel, table_chroma[gy, gx])
             ok = (to_instance <= params.chroma_threshold) & (~table[gy, gx] | (to_instance < to_table))

@@ -12,6 +12,7 @@ from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
 from arm_core.settings import setting
+from arm_core.vectors import vector_length
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,7 @@ class SupportLevel:
 def pixel_area_m2(points_camera: np.ndarray, normals_camera: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Approximate surface area (m^2) that each pixel covers, from depth and viewing incidence."""
     z = points_camera[..., 2]
-    dist = np.linalg.norm(points_camera, axis=-1)
+    dist = vector_length(points_camera)
     cos_incidence = np.abs(np.einsum("hwc,hwc->hw", normals_camera, points_camera)) / np.maximum(dist, 1e-6)
     return (z * z / (K[0, 0] * K[1, 1])) / np.maximum(cos_incidence, 0.25)
 
