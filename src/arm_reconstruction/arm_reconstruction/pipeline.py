@@ -258,12 +258,13 @@ class Reconstructor:
         if rgb is not None and np.asarray(rgb).shape[:2] != np.asarray(depth_m).shape[:2]:
             raise GridInputError(f"rgb shape {np.asarray(rgb).shape} does not match depth {np.asarray(depth_m).shape}")
         self.timer.reset()
-        grids = self.grids(depth_m, K, T_world_camera, labels, object_ids)
+        # every stage sees the same checked depth (non-finite values and speckles gone)
+        frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb, labels=labels)
+        grids = self.grids(frame.depth_m, frame.K, frame.T_world_camera, frame.labels, object_ids)
         self._stop_if_asked()
         probabilities = self.predict(grids)
-        objects = self.build_objects(grids, probabilities, depth_m, labels, K, T_world_camera)
+        objects = self.build_objects(grids, probabilities, frame.depth_m, frame.labels, frame.K, frame.T_world_camera)
         if rgb is not None:
-            frame = validate_frame(depth_m, K, T_world_camera, rgb=rgb, labels=labels)
             for obj in objects:
                 if obj.ok:
                     vertices = obj.mesh.vertices @ obj.T_world_object[:3, :3].T + obj.T_world_object[:3, 3]

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from arm_core.camera import look_at
-from arm_core.frames import FrameInputError
+from arm_core.frames import FrameInputError, validate_frame
 from arm_reconstruction.checkpoint import CheckpointError, save_checkpoint
 from arm_reconstruction.convex_parts import decomposition_iou
 from arm_reconstruction.grid import GridInputError, voxelize_mesh
@@ -141,6 +141,27 @@ def test_bad_frames_and_objects(sim, checkpoints):
     single[100, 100] = 7
     (obj,) = reconstructor(None, depth, K, T, single)
     assert obj.id == 7 and not obj.ok and "valid depth points" in obj.error and len(obj.mesh.faces) == 0
+
+
+def test_every_stage_sees_the_checked_depth(sim, checkpoints):
+    """Non-finite depth and lone wrong returns (a sensor's speckles) inside an object give the same
+    objects as the frame the validator cleans them from: no stage reads the raw depth."""
+    _, frame = sim
+    reconstructor = Reconstructor(ReconstructionSettings(checkpoint_path=str(checkpoints / "arm.pt")))
+    rgb, depth, K, T, labels = args(frame)
+    raw = depth.copy()
+    ys, xs = np.nonzero(labels > 0)
+    pick = np.random.default_rng(2).choice(len(ys), size=12, replace=False)
+    raw[ys[pick[:6]], xs[pick[:6]]] = np.nan
+    raw[ys[pick[6:]], xs[pick[6:]]] = 17.0  # single returns far behind the surface around them
+    cleaned = validate_frame(raw, K, T).depth_m
+    assert np.all(cleaned[ys[pick[:6]], xs[pick[:6]]] == 0.0) and np.any(cleaned[ys[pick[6:]], xs[pick[6:]]] == 0.0)
+    from_raw = reconstructor(rgb, raw, K, T, labels)
+    from_cleaned = reconstructor(rgb, cleaned, K, T, labels)
+    assert [o.id for o in from_raw] == [o.id for o in from_cleaned] and from_raw
+    for a, b in zip(from_raw, from_cleaned, strict=True):
+        assert a.ok == b.ok and np.array_equal(a.T_world_object, b.T_world_object)
+        assert np.array_equal(a.mesh.vertices, b.mesh.vertices) and np.array_equal(a.vertex_colours, b.vertex_colours)
 
 
 def test_checkpoint_problems_are_clear_errors(checkpoints, tmp_path):
