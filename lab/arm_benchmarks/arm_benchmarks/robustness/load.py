@@ -17,6 +17,7 @@ from arm_benchmarks.robustness.logs import tracebacks
 from arm_benchmarks.robustness.messages import stamp_of
 from arm_interfaces.action import Manipulate
 from arm_interfaces.msg import ReconstructedObjectArray, SegmentedFrame
+from arm_planner.node_config import PlanNodeConfig
 from arm_ros.common import latched_qos, sensor_qos
 from arm_ros.processes import NodeProcess
 
@@ -159,18 +160,27 @@ def rate_against_first_window(rates: list[float], tolerance: float = 0.1) -> dic
     }
 
 
+def warmup_mesh_arrays() -> int:
+    """Mesh arrays the graph publishes before its memory is measured: until the planner's scene
+    history (PlanNodeConfig.scene_history arrays, about 0.7 MB each for six objects) is full, and at
+    least 3 (allocator pools and caches fill during the first frames). Filling a bounded buffer is
+    warm-up, not growth."""
+    return max(3, PlanNodeConfig().scene_history)
+
+
 def run_load(
     probe,
     graph: dict[str, NodeProcess],
     duration_s: float,
-    warmup_meshes: int = 3,
+    warmup_meshes: int | None = None,
     warmup_timeout_s: float = 240.0,
     sample_period_s: float = 1.0,
     progress=None,
 ) -> dict:
-    """Run the graph for duration_s once `warmup_meshes` mesh arrays came out (allocator pools and
-    caches fill during the first frames); sample memory and rates. Memory of the warm-up is kept
-    apart (`warmup_rss_mb`) from the growth during the measured run."""
+    """Run the graph for duration_s once `warmup_meshes` mesh arrays came out (None:
+    warmup_mesh_arrays()); sample memory and rates. Memory of the warm-up is kept apart
+    (`at_first_meshes_mb`) from the growth during the measured run."""
+    warmup_meshes = warmup_mesh_arrays() if warmup_meshes is None else warmup_meshes
     watch = GraphWatch(probe)
     started = time.monotonic()
     warm = probe.wait_until(lambda: watch.totals()["reconstruction"] > 0, warmup_timeout_s, poll_s=0.2)
