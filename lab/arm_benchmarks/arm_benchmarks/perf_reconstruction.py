@@ -24,6 +24,7 @@ from tqdm import tqdm
 
 from arm_benchmarks.stats import median
 from arm_core.camera import look_at
+from arm_core.heap import freeze_startup_objects
 from arm_reconstruction.checkpoint import default_checkpoint_path
 from arm_reconstruction.convex_parts import ConvexDecomposer, DecompositionSettings, decomposition_iou
 from arm_reconstruction.grid import frame_grids, voxelize_mesh
@@ -142,6 +143,7 @@ def measure(
     settings = ReconstructionSettings(method=method, checkpoint_path=str(path) if trained else "")
     reconstructor = Reconstructor(settings, model=None if trained else build_model(variant, 32))
     message = segmented_frame_msg(frame, Header())
+    freeze_startup_objects()  # as every node does once it is built (arm_ros.common.run_node)
 
     stage_samples = {stage: [] for stage in ("decode", *STAGES, "encode", "markers", "total")}
     cpu_samples = []

@@ -13,6 +13,7 @@ from arm_interfaces.msg import GridMetadata, ReconstructedObjectArray
 from arm_interfaces.msg import ReconstructedObject as ReconstructedObjectMsg
 from arm_ros.conversions.meshes import object_msg, reconstructed_object_from_msg
 from arm_ros.conversions.poses import matrix_to_pose, matrix_to_transform_msg
+from arm_ros.conversions.sequences import colours_from_array, points_from_array
 
 from .grid import GridFrame
 from .pipeline import ReconstructedObject
@@ -99,10 +100,10 @@ def markers_msg(objects: list[ReconstructedObject], header, alpha: float = 0.8) 
         marker.color = object_colour(obj.id, alpha)
         corner_index = np.asarray(obj.mesh.faces).reshape(-1)
         corners = np.asarray(obj.mesh.vertices, dtype=np.float64)[corner_index]
-        marker.points = [Point(x=x, y=y, z=z) for x, y, z in corners.tolist()]
+        marker.points = points_from_array(corners)
         if obj.vertex_colours is not None and len(obj.vertex_colours) == len(obj.mesh.vertices):
             rgb = obj.vertex_colours[corner_index].astype(np.float64) / 255.0  # the camera's colours
-            marker.colors = [ColorRGBA(r=r, g=g, b=b, a=float(alpha)) for r, g, b in rgb.tolist()]
+            marker.colors = colours_from_array(rgb, alpha)
         markers.append(marker)
     return MarkerArray(markers=markers)
 

@@ -16,6 +16,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
+from arm_core.heap import freeze_startup_objects
 from arm_core.settings import parameters_of, with_values
 
 
@@ -180,7 +181,9 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
     ParameterException, raised by declare_parameter on a range or type violation) exits the process
     with code 2 and one clear line instead of a traceback, and errors that SIGINT/SIGTERM provoke in a callback
     or take in flight end the process cleanly (exit code 0). A fatal signal (a crash in native code)
-    writes every thread's Python stack to stderr, the node's log, before the process dies."""
+    writes every thread's Python stack to stderr, the node's log, before the process dies. Once the
+    node is built, its start-up objects are frozen out of the garbage collector's scans
+    (arm_core.heap)."""
     faulthandler.enable()
     use_large_socket_buffers()
     rclpy.init(args=args)
@@ -190,6 +193,7 @@ def run_node(node_factory, args=None, executor_factory=None) -> int:
         node = node_factory()
         executor = executor_factory() if executor_factory is not None else SingleThreadedExecutor()
         executor.add_node(node)
+        freeze_startup_objects()
         spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -1,29 +1,31 @@
 """shape_msgs/Mesh and arm_interfaces/ReconstructedObject <-> numpy meshes."""
 
 import numpy as np
-from geometry_msgs.msg import Point
-from shape_msgs.msg import Mesh, MeshTriangle
+from shape_msgs.msg import Mesh
 
 from arm_interfaces.msg import ReconstructedObject
 from arm_ros.conversions import ConversionError
 from arm_ros.conversions.poses import matrix_to_pose, pose_to_matrix
+from arm_ros.conversions.sequences import (
+    array_from_points,
+    array_from_triangles,
+    points_from_array,
+    triangles_from_array,
+)
 
 
 def mesh_to_msg(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     """(N,3) vertices in metres and (M,3) triangle indices -> shape_msgs/Mesh."""
-    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    faces = np.asarray(faces, dtype=np.uint32).reshape(-1, 3)
     msg = Mesh()
-    # tolist() gives Python floats and ints at once: half the time of converting each element.
-    msg.vertices = [Point(x=x, y=y, z=z) for x, y, z in vertices.tolist()]
-    msg.triangles = [MeshTriangle(vertex_indices=corners) for corners in faces.tolist()]
+    msg.vertices = points_from_array(vertices)
+    msg.triangles = triangles_from_array(faces)
     return msg
 
 
 def msg_to_mesh(msg: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """shape_msgs/Mesh -> ((N,3) float64 vertices, (M,3) int64 faces). Raises on bad indices."""
-    vertices = np.array([(p.x, p.y, p.z) for p in msg.vertices], dtype=np.float64).reshape(-1, 3)
-    faces = np.array([t.vertex_indices for t in msg.triangles], dtype=np.int64).reshape(-1, 3)
+    vertices = array_from_points(msg.vertices)
+    faces = array_from_triangles(msg.triangles)
     if not np.all(np.isfinite(vertices)):
         raise ConversionError("mesh has non-finite vertices")
     if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
